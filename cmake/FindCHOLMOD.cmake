@@ -1,0 +1,30 @@
+# FindCHOLMOD: SuiteSparse CHOLMOD and the libraries it needs.
+# Debian's SuiteSparse 5.12 ships neither CMake configs nor pkg-config files.
+# Defines the imported target CHOLMOD::CHOLMOD.
+find_path(CHOLMOD_INCLUDE_DIR cholmod.h PATH_SUFFIXES suitesparse)
+find_library(CHOLMOD_LIBRARY cholmod)
+find_library(CHOLMOD_AMD_LIBRARY amd)
+find_library(CHOLMOD_CAMD_LIBRARY camd)
+find_library(CHOLMOD_COLAMD_LIBRARY colamd)
+find_library(CHOLMOD_CCOLAMD_LIBRARY ccolamd)
+find_library(CHOLMOD_CONFIG_LIBRARY suitesparseconfig)
+include(FindPackageHandleStandardArgs)
+find_package_handle_standard_args(CHOLMOD
+  REQUIRED_VARS CHOLMOD_LIBRARY CHOLMOD_INCLUDE_DIR CHOLMOD_AMD_LIBRARY
+                CHOLMOD_COLAMD_LIBRARY CHOLMOD_CONFIG_LIBRARY)
+if(CHOLMOD_FOUND AND NOT TARGET CHOLMOD::CHOLMOD)
+  add_library(CHOLMOD::CHOLMOD UNKNOWN IMPORTED)
+  set(_extra ${CHOLMOD_AMD_LIBRARY} ${CHOLMOD_COLAMD_LIBRARY} ${CHOLMOD_CONFIG_LIBRARY})
+  if(CHOLMOD_CAMD_LIBRARY)
+    list(APPEND _extra ${CHOLMOD_CAMD_LIBRARY})
+  endif()
+  if(CHOLMOD_CCOLAMD_LIBRARY)
+    list(APPEND _extra ${CHOLMOD_CCOLAMD_LIBRARY})
+  endif()
+  set_target_properties(CHOLMOD::CHOLMOD PROPERTIES
+    IMPORTED_LOCATION "${CHOLMOD_LIBRARY}"
+    INTERFACE_INCLUDE_DIRECTORIES "${CHOLMOD_INCLUDE_DIR}"
+    INTERFACE_LINK_LIBRARIES "${_extra}")
+endif()
+mark_as_advanced(CHOLMOD_INCLUDE_DIR CHOLMOD_LIBRARY CHOLMOD_AMD_LIBRARY CHOLMOD_CAMD_LIBRARY
+                 CHOLMOD_COLAMD_LIBRARY CHOLMOD_CCOLAMD_LIBRARY CHOLMOD_CONFIG_LIBRARY)

@@ -1,0 +1,9 @@
+#pragma once
+#include <pybind11/pybind11.h>
+
+namespace emu::bindings {
+void bind_energy(pybind11::module_& m);
+void bind_linalg(pybind11::module_& m);
+void bind_mesh(pybind11::module_& m);
+void bind_solvers(pybind11::module_& m);
+}  // namespace emu::bindings

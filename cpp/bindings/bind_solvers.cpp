@@ -1,0 +1,113 @@
+#include <pybind11/eigen.h>
+#include <pybind11/stl.h>
+
+#include "bind.h"
+#include "emu/model/model.h"
+#include "emu/solvers/emu_solver.h"
+#include "emu/solvers/fem_solver.h"
+
+namespace py = pybind11;
+
+namespace emu::bindings {
+namespace {
+Eigen::MatrixXd history_array(const SolveResult& r) {
+  Eigen::MatrixXd h(r.history.size(), 7);
+  for (size_t i = 0; i < r.history.size(); ++i) {
+    const auto& e = r.history[i];
+    h.row(i) << e.iteration, e.energy, e.grad_norm, e.step, e.time_s, e.cg_iterations, e.backtracks;
+  }
+  return h;
+}
+}  // namespace
+
+void bind_solvers(py::module_& m) {
+  py::class_<Model>(m, "Model")
+      .def(py::init<>())
+      .def_readwrite("rest", &Model::rest)
+      .def_readwrite("tets", &Model::tets)
+      .def_readwrite("mu", &Model::mu)
+      .def_readwrite("lam", &Model::lambda)
+      .def_readwrite("density", &Model::density)
+      .def_readwrite("acap_weight", &Model::acap_weight)
+      .def_readwrite("fiber", &Model::fiber)
+      .def_readwrite("muscle", &Model::muscle)
+      .def_readwrite("pinned", &Model::pinned)
+      .def_readwrite("num_muscles", &Model::num_muscles)
+      .def("validate", &Model::validate);
+
+  py::class_<LoadCase>(m, "LoadCase")
+      .def(py::init<>())
+      .def_readwrite("activation", &LoadCase::activation)
+      .def_readwrite("pin_positions", &LoadCase::pin_positions)
+      .def_readwrite("gravity", &LoadCase::gravity);
+
+  py::class_<SolverOptions>(m, "SolverOptions")
+      .def(py::init<>())
+      .def_readwrite("max_iterations", &SolverOptions::max_iterations)
+      .def_readwrite("rtol_grad", &SolverOptions::rtol_grad)
+      .def_readwrite("rtol_energy", &SolverOptions::rtol_energy)
+      .def_readwrite("armijo", &SolverOptions::armijo)
+      .def_readwrite("max_backtracks", &SolverOptions::max_backtracks);
+
+  py::enum_<EmuStep>(m, "EmuStep").value("woodbury", EmuStep::Woodbury).value("newton_krylov", EmuStep::NewtonKrylov);
+
+  py::class_<EmuOptions>(m, "EmuOptions")
+      .def(py::init<>())
+      .def_readwrite("alpha", &EmuOptions::alpha)
+      .def_readwrite("modes", &EmuOptions::modes)
+      .def_readwrite("step", &EmuOptions::step)
+      .def_readwrite("cg_max_iterations", &EmuOptions::cg_max_iterations)
+      .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max);
+
+  py::class_<SolveResult>(m, "SolveResult")
+      .def_readonly("positions", &SolveResult::positions)
+      .def_readonly("F", &SolveResult::F)
+      .def_readonly("converged", &SolveResult::converged)
+      .def_readonly("status", &SolveResult::status)
+      .def_readonly("iterations", &SolveResult::iterations)
+      .def_readonly("cg_iterations", &SolveResult::cg_iterations)
+      .def_readonly("energy", &SolveResult::energy)
+      .def_readonly("grad_norm", &SolveResult::grad_norm)
+      .def_readonly("grad_norm0", &SolveResult::grad_norm0)
+      .def_readonly("rel_energy_change", &SolveResult::rel_energy_change)
+      .def_readonly("time_s", &SolveResult::time_s)
+      .def_property_readonly("history", &history_array,
+                             "#iterations+1 by 7: iteration, energy, grad_norm, step, time_s, cg_iterations, backtracks");
+
+  using gil = py::call_guard<py::gil_scoped_release>;
+  py::class_<FemSolver>(m, "FemSolver")
+      .def(py::init<const Model&, const SolverOptions&>(), py::arg("model"), py::arg("options"), gil())
+      .def(
+          "solve", [](FemSolver& s, const LoadCase& l) { return s.solve(l); }, py::arg("load"), gil())
+      .def(
+          "solve_from", [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0) { return s.solve(l, &x0); },
+          py::arg("load"), py::arg("x0"), gil())
+      .def("energy", &FemSolver::energy, py::arg("load"), py::arg("x"), gil())
+      .def("gradient", &FemSolver::gradient, py::arg("load"), py::arg("x"), gil())
+      .def_property_readonly("setup_seconds", &FemSolver::setup_seconds)
+      .def_property_readonly("factor_nnz", &FemSolver::factor_nnz);
+
+  py::class_<EmuSolver>(m, "EmuSolver")
+      .def(py::init<const Model&, const SolverOptions&, const EmuOptions&>(), py::arg("model"), py::arg("options"),
+           py::arg("emu_options"), gil())
+      .def(
+          "solve", [](EmuSolver& s, const LoadCase& l) { return s.solve(l); }, py::arg("load"), gil())
+      .def(
+          "solve_from", [](EmuSolver& s, const LoadCase& l, const Eigen::MatrixXd& F0) { return s.solve(l, &F0); },
+          py::arg("load"), py::arg("F0"), gil())
+      .def("energy", &EmuSolver::energy, py::arg("load"), py::arg("F"), gil())
+      .def("gradient", &EmuSolver::gradient, py::arg("load"), py::arg("F"), gil())
+      .def("fit_positions", &EmuSolver::fit_positions, py::arg("load"), py::arg("F"), gil())
+      .def("hessian_product", &EmuSolver::hessian_product, py::arg("load"), py::arg("F"), py::arg("V"), gil())
+      .def("woodbury_solve", &EmuSolver::woodbury_solve, py::arg("load"), py::arg("F"), py::arg("R"), gil())
+      .def("block_hessians", &EmuSolver::block_hessians, py::arg("load"), py::arg("F"), gil())
+      .def("mode_matrix", &EmuSolver::mode_matrix)
+      .def("mode_values", &EmuSolver::mode_values)
+      .def_property_readonly("modes", &EmuSolver::modes)
+      .def_property_readonly("alpha", &EmuSolver::alpha)
+      .def_property_readonly("factor_seconds", &EmuSolver::factor_seconds)
+      .def_property_readonly("modes_seconds", &EmuSolver::modes_seconds)
+      .def_property_readonly("setup_seconds", &EmuSolver::setup_seconds)
+      .def_property_readonly("factor_nnz", &EmuSolver::factor_nnz);
+}
+}  // namespace emu::bindings

@@ -1,0 +1,35 @@
+#pragma once
+// Soft-tissue density per unit rest volume: Stable Neo-Hookean plus the active
+// fibre term. The Hessian is made PSD per element before any Newton-type use:
+// only the Neo-Hookean part can be indefinite (the fibre Hessian is PSD).
+#include "emu/energy/fiber.h"
+#include "emu/energy/psd_project.h"
+#include "emu/energy/stable_neo_hookean.h"
+
+namespace emu {
+
+struct TetMaterial {
+  double mu, lambda;  // Lame parameters
+  double activation;  // a >= 0
+  Vec3 fiber;         // unit fibre direction (ignored when activation is 0)
+};
+
+inline double material_energy(const TetMaterial& m, const Mat3& F) {
+  double e = snh::energy(F, m.mu, m.lambda);
+  if (m.activation != 0.0) e += fiber::energy(F, m.fiber, m.activation);
+  return e;
+}
+
+inline Mat3 material_stress(const TetMaterial& m, const Mat3& F) {
+  Mat3 P = snh::stress(F, m.mu, m.lambda);
+  if (m.activation != 0.0) P += fiber::stress(F, m.fiber, m.activation);
+  return P;
+}
+
+inline Mat9 material_hessian_psd(const TetMaterial& m, const Mat3& F) {
+  Mat9 H = psd_project<9>(snh::hessian(F, m.mu, m.lambda));
+  if (m.activation != 0.0) H += fiber::hessian(m.fiber, m.activation);
+  return H;
+}
+
+}  // namespace emu

@@ -1,0 +1,99 @@
+#include "emu/linalg/cholmod_factor.h"
+
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+namespace emu {
+namespace {
+thread_local std::string last_cholmod_error;
+void record_error(int status, const char* /*file*/, int /*line*/, const char* message) {
+  if (status < 0) last_cholmod_error = message ? message : "unknown CHOLMOD error";
+}
+}  // namespace
+
+CholmodFactor::CholmodFactor() {
+  cholmod_start(&common_);
+  common_.supernodal = CHOLMOD_SUPERNODAL;
+  common_.print = 0;
+  common_.error_handler = record_error;
+}
+
+CholmodFactor::~CholmodFactor() {
+  if (L_) cholmod_free_factor(&L_, &common_);
+  if (A_) cholmod_free_sparse(&A_, &common_);
+  if (X_) cholmod_free_dense(&X_, &common_);
+  if (Y_) cholmod_free_dense(&Y_, &common_);
+  if (E_) cholmod_free_dense(&E_, &common_);
+  cholmod_finish(&common_);
+}
+
+void CholmodFactor::check(const char* what) const {
+  if (common_.status < 0) {
+    throw std::runtime_error(std::string("CHOLMOD ") + what + " failed: " + last_cholmod_error);
+  }
+}
+
+void CholmodFactor::analyze(int n, const int* col_ptr, const int* row_index) {
+  if (L_) cholmod_free_factor(&L_, &common_);
+  if (A_) cholmod_free_sparse(&A_, &common_);
+  factorized_ = false;
+  n_ = n;
+  const size_t nnz = static_cast<size_t>(col_ptr[n]);
+  A_ = cholmod_allocate_sparse(n, n, nnz, /*sorted*/ 1, /*packed*/ 1, /*stype*/ 1, CHOLMOD_REAL,
+                               &common_);
+  check("allocate");
+  if (!A_) throw std::runtime_error("CHOLMOD could not allocate the matrix (out of memory?)");
+  std::memcpy(A_->p, col_ptr, sizeof(int) * (n + 1));
+  std::memcpy(A_->i, row_index, sizeof(int) * nnz);
+  std::memset(A_->x, 0, sizeof(double) * nnz);
+  L_ = cholmod_analyze(A_, &common_);
+  check("analyze");
+  if (!L_) throw std::runtime_error("CHOLMOD analysis failed (out of memory?)");
+}
+
+bool CholmodFactor::factorize(const double* values) {
+  if (!A_ || !L_) throw std::logic_error("CholmodFactor::factorize before analyze");
+  const size_t nnz = static_cast<const int*>(A_->p)[n_];
+  std::memcpy(A_->x, values, sizeof(double) * nnz);
+  cholmod_factorize(A_, L_, &common_);
+  if (common_.status == CHOLMOD_NOT_POSDEF) {
+    factorized_ = false;
+    return false;
+  }
+  check("factorize");
+  factorized_ = true;
+  return true;
+}
+
+void CholmodFactor::solve(const double* b, double* x, int nrhs) const {
+  if (!factorized_) throw std::logic_error("CholmodFactor::solve before a successful factorize");
+  cholmod_dense B;
+  std::memset(&B, 0, sizeof(B));
+  B.nrow = n_;
+  B.ncol = nrhs;
+  B.nzmax = static_cast<size_t>(n_) * nrhs;
+  B.d = n_;
+  B.x = const_cast<double*>(b);
+  B.xtype = CHOLMOD_REAL;
+  B.dtype = CHOLMOD_DOUBLE;
+  cholmod_solve2(CHOLMOD_A, L_, &B, nullptr, &X_, nullptr, &Y_, &E_, &common_);
+  check("solve");
+  std::memmove(x, X_->x, sizeof(double) * n_ * nrhs);
+}
+
+double CholmodFactor::factor_nnz() const {
+  if (!L_) return 0.0;
+  if (L_->is_super) {
+    // Supernodal: sum over supernodes of (rows x columns).
+    const int* super = static_cast<const int*>(L_->super);
+    const int* pi = static_cast<const int*>(L_->pi);
+    double total = 0;
+    for (size_t s = 0; s < L_->nsuper; ++s)
+      total += static_cast<double>(pi[s + 1] - pi[s]) * (super[s + 1] - super[s]);
+    return total;
+  }
+  return static_cast<double>(static_cast<const int*>(L_->p)[n_]);
+}
+
+}  // namespace emu

@@ -1,0 +1,48 @@
+#pragma once
+// One RAII, non-copyable owner of a CHOLMOD supernodal Cholesky factor.
+// Symbolic analysis (fill-reducing ordering) happens once per pattern;
+// numeric factorisations and solves reuse it.
+#include <string>
+
+#include <cholmod.h>
+
+namespace emu {
+
+class CholmodFactor {
+ public:
+  CholmodFactor();
+  ~CholmodFactor();
+  CholmodFactor(const CholmodFactor&) = delete;
+  CholmodFactor& operator=(const CholmodFactor&) = delete;
+
+  /// Symbolic analysis of an n x n symmetric matrix given by its upper triangle
+  /// in compressed-column form (sorted row indices).
+  void analyze(int n, const int* col_ptr, const int* row_index);
+
+  /// Numeric factorisation with the analysed pattern. values: nnz doubles in the
+  /// order of row_index. Returns false if the matrix is not positive definite.
+  bool factorize(const double* values);
+
+  /// x = A^-1 b for nrhs right-hand sides; b and x are n x nrhs column-major
+  /// (they may alias).
+  void solve(const double* b, double* x, int nrhs) const;
+
+  int rows() const { return n_; }
+  bool factorized() const { return factorized_; }
+  double factor_nnz() const;
+  /// Entries of A (upper triangle) as analysed.
+  const cholmod_sparse* matrix() const { return A_; }
+
+ private:
+  void check(const char* what) const;
+  mutable cholmod_common common_;
+  cholmod_sparse* A_ = nullptr;
+  cholmod_factor* L_ = nullptr;
+  mutable cholmod_dense* X_ = nullptr;
+  mutable cholmod_dense* Y_ = nullptr;
+  mutable cholmod_dense* E_ = nullptr;
+  int n_ = 0;
+  bool factorized_ = false;
+};
+
+}  // namespace emu

@@ -1,0 +1,314 @@
+#include "emu/solvers/emu_solver.h"
+
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "emu/energy/material.h"
+
+namespace emu {
+namespace {
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
+}  // namespace
+
+struct EmuSolver::Context {
+  Eigen::VectorXd act;         // #T activation
+  Eigen::MatrixX3d x_pinned;   // #V by 3: pinned rows at targets, free rows zero
+  Mat9X F_pinned;              // F_t(x_pinned)
+  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
+  bool has_gravity = false;
+  Mat9X F_gravity;             // F_t(L^-1 f): the load's share of the gradient
+};
+
+EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options)
+    : model_((model.validate(), model)), disc_(model_), options_(options), emu_(emu_options) {
+  if (!(emu_.alpha > 0) || !std::isfinite(emu_.alpha)) throw std::invalid_argument("alpha must be positive and finite");
+  if (emu_.modes < 0) throw std::invalid_argument("the number of modes must be >= 0");
+  auto t0 = Clock::now();
+  acap_ = std::make_unique<AcapOperator>(model_, disc_);
+  factor_seconds_ = seconds_since(t0);
+  t0 = Clock::now();
+  const int ks = std::min((emu_.modes + 2) / 3, disc_.num_free);
+  const Modes modes = lowest_modes(acap_->factor(), ks);
+  modes_seconds_ = seconds_since(t0);
+  woodbury_ = std::make_unique<Woodbury>(model_, disc_, modes, acap_->weight_volume(), emu_.alpha);
+  tet_energy_.resize(model_.tets.rows());
+}
+
+EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
+  validate_load(model_, load);
+  Context c;
+  c.act = tet_activation(model_, load);
+  c.x_pinned = pinned_positions(model_, load);
+  for (Eigen::Index v = 0; v < c.x_pinned.rows(); ++v)
+    if (disc_.free_index(v) >= 0) c.x_pinned.row(v).setZero();
+  deformation_gradients(disc_, model_.tets, c.x_pinned, c.F_pinned);
+  c.gravity = load.gravity;
+  c.has_gravity = load.gravity.squaredNorm() > 0;
+  if (c.has_gravity) {
+    Eigen::MatrixX3d f(disc_.num_free, 3), y(disc_.num_free, 3);
+    for (Eigen::Index v = 0; v < model_.rest.rows(); ++v)
+      if (disc_.free_index(v) >= 0) f.row(disc_.free_index(v)) = disc_.lumped_mass(v) * load.gravity.transpose();
+    acap_->solve(f, y);
+    Eigen::MatrixX3d yfull = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
+    acap_->scatter_free(y, yfull);
+    deformation_gradients(disc_, model_.tets, yfull, c.F_gravity);
+  }
+  return c;
+}
+
+void EmuSolver::fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const {
+  x = c.x_pinned;
+  acap_->fit(F, &c.F_pinned, x);
+  deformation_gradients(disc_, model_.tets, x, Fx);
+}
+
+void EmuSolver::fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const {
+  dx.setZero(model_.rest.rows(), 3);
+  acap_->fit(D, nullptr, dx);
+  deformation_gradients(disc_, model_.tets, dx, Fd);
+}
+
+double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
+                               const Mat9X* Fd, double s) const {
+  const Eigen::Index m = model_.tets.rows();
+  const auto& V = disc_.geometry.volume;
+  const auto& wv = acap_->weight_volume();
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index t = 0; t < m; ++t) {
+    Vec9 f = F.col(t), fx = Fx.col(t);
+    if (D) {
+      f += s * D->col(t);
+      fx += s * Fd->col(t);
+    }
+    const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
+    tet_energy_[t] = V(t) * material_energy(mat, unflatten(f)) + 0.5 * emu_.alpha * wv(t) * (fx - f).squaredNorm();
+  }
+  double E = 0;
+  for (Eigen::Index t = 0; t < m; ++t) E += tet_energy_[t];
+  return E;
+}
+
+void EmuSolver::gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx, Mat9X& g) const {
+  const Eigen::Index m = model_.tets.rows();
+  const auto& V = disc_.geometry.volume;
+  const auto& wv = acap_->weight_volume();
+  g.resize(9, m);
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index t = 0; t < m; ++t) {
+    const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
+    Vec9 gt = V(t) * flatten(material_stress(mat, unflatten(F.col(t)))) + emu_.alpha * wv(t) * (F.col(t) - Fx.col(t));
+    if (c.has_gravity) gt -= wv(t) * c.F_gravity.col(t);
+    g.col(t) = gt;
+  }
+}
+
+void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>& A) const {
+  const Eigen::Index m = model_.tets.rows();
+  const auto& V = disc_.geometry.volume;
+  const auto& wv = acap_->weight_volume();
+  A.resize(m);
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index t = 0; t < m; ++t) {
+    const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
+    A[t] = V(t) * material_hessian_psd(mat, unflatten(F.col(t)));
+    A[t].diagonal().array() += emu_.alpha * wv(t);
+  }
+}
+
+void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) const {
+  // H v = A v - alpha C^T K_c^-1 C v, and C^T K_c^-1 C v = w V F_t(x*(v)) with x*(v)
+  // the homogeneous fit: one back-substitution.
+  Eigen::MatrixX3d dx;
+  Mat9X Fd;
+  fit_linear_into(v, dx, Fd);
+  const auto& wv = acap_->weight_volume();
+  const Eigen::Index m = model_.tets.rows();
+  out.resize(9, m);
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index t = 0; t < m; ++t) out.col(t) = A[t] * v.col(t) - emu_.alpha * wv(t) * Fd.col(t);
+}
+
+Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
+  if (rows.rows() != model_.tets.rows() || rows.cols() != 9)
+    throw std::invalid_argument("expected a #T by 9 array (one vec(F) per tet), got " +
+                                std::to_string(rows.rows()) + " by " + std::to_string(rows.cols()));
+  if (!rows.allFinite()) throw std::invalid_argument("deformation gradients contain NaN or infinite values");
+  return rows.transpose();
+}
+
+double EmuSolver::energy(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
+  const Context c = make_context(load);
+  const Mat9X F = to_cols(Frows);
+  Eigen::MatrixX3d x;
+  Mat9X Fx;
+  fit_into(c, F, x, Fx);
+  double E = energy_along(c, F, Fx, nullptr, nullptr, 0.0);
+  if (c.has_gravity) E -= (disc_.lumped_mass.transpose() * x).dot(c.gravity.transpose());
+  return E;
+}
+
+Eigen::MatrixXd EmuSolver::gradient(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
+  const Context c = make_context(load);
+  const Mat9X F = to_cols(Frows);
+  Eigen::MatrixX3d x;
+  Mat9X Fx, g;
+  fit_into(c, F, x, Fx);
+  gradient_into(c, F, Fx, g);
+  return g.transpose();
+}
+
+Eigen::MatrixX3d EmuSolver::fit_positions(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
+  const Context c = make_context(load);
+  Eigen::MatrixX3d x;
+  Mat9X Fx;
+  fit_into(c, to_cols(Frows), x, Fx);
+  return x;
+}
+
+Eigen::MatrixXd EmuSolver::hessian_product(const LoadCase& load, const Eigen::MatrixXd& Frows,
+                                           const Eigen::MatrixXd& Vrows) const {
+  const Context c = make_context(load);
+  std::vector<Mat9> A;
+  blocks_into(c, to_cols(Frows), A);
+  Mat9X out;
+  hessian_product_into(A, to_cols(Vrows), out);
+  return out.transpose();
+}
+
+Eigen::MatrixXd EmuSolver::woodbury_solve(const LoadCase& load, const Eigen::MatrixXd& Frows,
+                                          const Eigen::MatrixXd& Rrows) const {
+  const Context c = make_context(load);
+  std::vector<Mat9> A;
+  blocks_into(c, to_cols(Frows), A);
+  Woodbury w = *woodbury_;
+  if (!w.update(A)) throw std::runtime_error("Woodbury system X is not positive definite");
+  Mat9X out;
+  w.apply(to_cols(Rrows), out);
+  return out.transpose();
+}
+
+Eigen::MatrixXd EmuSolver::block_hessians(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
+  const Context c = make_context(load);
+  std::vector<Mat9> A;
+  blocks_into(c, to_cols(Frows), A);
+  Eigen::MatrixXd out(A.size(), 81);
+  for (size_t t = 0; t < A.size(); ++t) out.row(t) = Eigen::Map<const Eigen::Matrix<double, 1, 81>>(A[t].data());
+  return out;
+}
+
+SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
+  const auto t0 = Clock::now();
+  const Context c = make_context(load);
+  const Eigen::Index m = model_.tets.rows();
+  Mat9X F(9, m);
+  if (F0) {
+    F = to_cols(*F0);
+  } else {
+    for (Eigen::Index t = 0; t < m; ++t) F.col(t) = flatten(Mat3::Identity());
+  }
+  const auto& M = disc_.lumped_mass;
+  auto work = [&](const Eigen::MatrixX3d& x) {
+    return c.has_gravity ? (M.transpose() * x).dot(c.gravity.transpose()) : 0.0;
+  };
+  Eigen::MatrixX3d x, dx;
+  Mat9X Fx, Fd, g, d, r, z, p, Hp;
+  fit_into(c, F, x, Fx);
+  double E = energy_along(c, F, Fx, nullptr, nullptr, 0.0) - work(x);
+  gradient_into(c, F, Fx, g);
+  double gn = g.norm();
+  const double scale = (disc_.geometry.volume.array() *
+                        (model_.mu.array() + c.act.array() + emu_.alpha * model_.acap_weight.array())).sum();
+  Convergence conv{options_.rtol_grad, options_.rtol_energy, E, gn, 1e-13 * scale};
+  SolveResult res;
+  res.grad_norm0 = gn;
+  res.history.push_back({0, E, gn, 0.0, seconds_since(t0), 0, 0});
+  res.status = "max iterations reached";
+  if (conv.initial()) {
+    res.converged = true;
+    res.status = "converged: initial state is in equilibrium";
+  }
+  std::vector<Mat9> A;
+  for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
+    blocks_into(c, F, A);
+    woodbury_->update(A);
+    int cg_its = 0;
+    if (emu_.step == EmuStep::Woodbury) {
+      woodbury_->apply(g, d);
+      d = -d;
+    } else {
+      // Inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker).
+      const double eta = std::min(emu_.cg_forcing_max, std::sqrt(gn / conv.g0));
+      d.setZero(9, m);
+      r = -g;
+      woodbury_->apply(r, z);
+      p = z;
+      double rz = dot(r, z);
+      for (int i = 0; i < emu_.cg_max_iterations; ++i) {
+        hessian_product_into(A, p, Hp);
+        const double pHp = dot(p, Hp);
+        if (!(pHp > 0)) {  // no curvature along p: keep what we have
+          if (i == 0) d = z;
+          break;
+        }
+        const double a = rz / pHp;
+        d += a * p;
+        r -= a * Hp;
+        ++cg_its;
+        if (r.norm() <= eta * gn) break;
+        woodbury_->apply(r, z);
+        const double rz_new = dot(r, z);
+        p = z + (rz_new / rz) * p;
+        rz = rz_new;
+      }
+    }
+    double slope = dot(g, d);
+    if (!(slope < 0)) {
+      woodbury_->apply(g, d);
+      d = -d;
+      slope = dot(g, d);
+      if (!(slope < 0)) {
+        res.status = "no descent direction (Hessian approximation broke down)";
+        break;
+      }
+    }
+    fit_linear_into(d, dx, Fd);
+    const double Wx = work(x), Wdx = work(dx);
+    auto ls = armijo_backtracking(
+        [&](double s) { return energy_along(c, F, Fx, &d, &Fd, s) - Wx - s * Wdx; }, E, slope, options_);
+    if (!ls.success) {
+      res.status = "line search failed: no sufficient decrease along the step";
+      break;
+    }
+    F += ls.step * d;
+    if (it % 50 == 0) {
+      fit_into(c, F, x, Fx);  // x*(F) is linear in F; refit now and then against drift
+    } else {
+      x += ls.step * dx;
+      Fx += ls.step * Fd;
+    }
+    const double E_prev = E;
+    E = (it % 50 == 0) ? energy_along(c, F, Fx, nullptr, nullptr, 0.0) - work(x) : ls.energy;
+    gradient_into(c, F, Fx, g);
+    gn = g.norm();
+    res.iterations = it;
+    res.cg_iterations += cg_its;
+    res.history.push_back({it, E, gn, ls.step, seconds_since(t0), cg_its, ls.backtracks});
+    if (conv.test(E_prev, E, gn)) {
+      res.converged = true;
+      res.status = "converged";
+    }
+  }
+  fit_into(c, F, x, Fx);
+  res.positions = x;
+  res.F = F.transpose();
+  res.energy = E;
+  res.grad_norm = gn;
+  res.rel_energy_change = conv.rel_energy_change;
+  res.time_s = seconds_since(t0);
+  return res;
+}
+
+}  // namespace emu

@@ -1,0 +1,74 @@
+#pragma once
+// EMU: the same energy as FEM with one deformation gradient per tet as the
+// unknowns; positions are the ACAP fit x*(F) through one prefactored matrix.
+//
+//   E(F) = sum_t V_t Psi_t(F_t) + alpha/2 sum_t w_t V_t |F_t(x*) - F_t|^2 - W(x*)
+//   dE/dF_t = V_t P_t(F_t) + alpha w_t V_t (F_t - F_t(x*)) - w_t V_t F_t(L^-1 f)
+// (envelope theorem for the coupling term; the load term needs one extra
+// constant solve with the gravity forces f).
+//
+// Steps: the paper's Woodbury quasi-Newton step, or Newton-Krylov: conjugate
+// gradients on the exact Hessian H v = A v - alpha C^T K_c^-1 C v (one
+// back-substitution per product), preconditioned by the Woodbury step.
+// Never a factorisation after setup.
+#include <memory>
+
+#include "emu/linalg/modes.h"
+#include "emu/model/model.h"
+#include "emu/solvers/acap.h"
+#include "emu/solvers/solve_types.h"
+#include "emu/solvers/woodbury.h"
+
+namespace emu {
+
+class EmuSolver {
+ public:
+  EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options);
+
+  /// F0  #T by 9 start (vec(F) column-major per row; nullptr: identity)
+  SolveResult solve(const LoadCase& load, const Eigen::MatrixXd* F0 = nullptr);
+
+  // The pieces, for tests and diagnostics. F, V, R: #T by 9.
+  double energy(const LoadCase& load, const Eigen::MatrixXd& F) const;
+  Eigen::MatrixXd gradient(const LoadCase& load, const Eigen::MatrixXd& F) const;
+  Eigen::MatrixX3d fit_positions(const LoadCase& load, const Eigen::MatrixXd& F) const;
+  /// Exact Hessian (PSD-projected material blocks) times V.
+  Eigen::MatrixXd hessian_product(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& V) const;
+  /// H_k^-1 R with the solver's k modes.
+  Eigen::MatrixXd woodbury_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R) const;
+  /// Blocks A_t, #T by 81 (column-major 9x9 per row).
+  Eigen::MatrixXd block_hessians(const LoadCase& load, const Eigen::MatrixXd& F) const;
+  Eigen::MatrixXd mode_matrix() const { return woodbury_->dense_B(); }
+  Eigen::VectorXd mode_values() const { return woodbury_->lambda(); }
+
+  int modes() const { return woodbury_->k(); }
+  double alpha() const { return emu_.alpha; }
+  double factor_seconds() const { return factor_seconds_; }
+  double modes_seconds() const { return modes_seconds_; }
+  double setup_seconds() const { return factor_seconds_ + modes_seconds_; }
+  double factor_nnz() const { return acap_->factor().factor_nnz(); }
+  const Model& model() const { return model_; }
+
+ private:
+  struct Context;  // per-load data: activations, pinned share of F, gravity terms
+  Context make_context(const LoadCase& load) const;
+  double energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
+                      const Mat9X* Fd, double s) const;
+  void gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx, Mat9X& g) const;
+  void blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>& A) const;
+  void hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) const;
+  void fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const;
+  void fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const;
+  Mat9X to_cols(const Eigen::MatrixXd& rows) const;
+
+  Model model_;
+  Discretization disc_;
+  SolverOptions options_;
+  EmuOptions emu_;
+  std::unique_ptr<AcapOperator> acap_;
+  std::unique_ptr<Woodbury> woodbury_;
+  double factor_seconds_ = 0, modes_seconds_ = 0;
+  mutable std::vector<double> tet_energy_;
+};
+
+}  // namespace emu

@@ -1,0 +1,46 @@
+#pragma once
+// The reference: Newton on vertex positions with PSD-projected element
+// Hessians, assembled deterministically into a fixed pattern and factorised
+// by CHOLMOD every iteration (symbolic analysis once), Armijo backtracking.
+#include <memory>
+
+#include "emu/linalg/cholmod_factor.h"
+#include "emu/mesh/block_pattern.h"
+#include "emu/model/model.h"
+#include "emu/solvers/solve_types.h"
+
+namespace emu {
+
+class FemSolver {
+ public:
+  FemSolver(const Model& model, const SolverOptions& options);
+
+  /// initial  #V by 3 start positions (nullptr: rest); pinned rows are replaced by the load's.
+  SolveResult solve(const LoadCase& load, const Eigen::MatrixX3d* initial = nullptr);
+
+  /// Total energy E_FEM(x) (no rest offset) and its gradient over all vertices (#V by 3,
+  /// zero rows at pinned vertices) for positions x (#V by 3).
+  double energy(const LoadCase& load, const Eigen::MatrixX3d& x) const;
+  Eigen::MatrixX3d gradient(const LoadCase& load, const Eigen::MatrixX3d& x) const;
+
+  double setup_seconds() const { return setup_seconds_; }
+  const Model& model() const { return model_; }
+  double factor_nnz() const { return factor_.factor_nnz(); }
+
+ private:
+  void free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x, const Eigen::VectorXd& act,
+                     Eigen::VectorXd& g) const;
+  double energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const Eigen::Vector3d& grav) const;
+  void assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act);
+
+  Model model_;
+  Discretization disc_;
+  SolverOptions options_;
+  BlockPattern pattern_;
+  CholmodFactor factor_;
+  std::vector<double> element_, values_;
+  mutable std::vector<double> corner_, tet_energy_;
+  double setup_seconds_ = 0;
+};
+
+}  // namespace emu

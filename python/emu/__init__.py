@@ -1,0 +1,2 @@
+"""emu: efficient muscle simulation in deformation space."""
+from . import _core  # noqa: F401

@@ -1,0 +1,110 @@
+"""Procedural meshes: a fusiform (spindle) muscle with tendon caps.
+
+The mesh is a structured grid: a square cross-section grid mapped onto a disk
+(elliptical grid mapping), swept along the muscle axis (z) with a spindle
+radius profile; every hex is split into six tets around its main diagonal
+(Kuhn subdivision, conforming across hexes). About ``24 r^3`` tets for
+resolution ``r`` (r=4: 1.5k tets, r=10: 24k, r=15: 81k, r=29: 585k).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import permutations
+
+import numpy as np
+
+__all__ = ["FusiformMesh", "fusiform", "resolution_for_tets"]
+
+
+@dataclass
+class FusiformMesh:
+    points: np.ndarray        # (n, 3) float64 rest positions
+    tets: np.ndarray          # (m, 4) int64, positively oriented
+    fibers: np.ndarray        # (m, 3) unit fibre directions (along the spindle's meridians)
+    is_tendon: np.ndarray     # (m,) bool: tet lies in a tendon cap
+    proximal: np.ndarray      # vertex ids of the z = 0 end face
+    distal: np.ndarray        # vertex ids of the z = length end face
+    length: float
+
+
+def resolution_for_tets(tets: int) -> int:
+    """The resolution whose mesh has about ``tets`` tets (24 r^3)."""
+    if tets <= 0:
+        raise ValueError(f"tets must be positive, got {tets}")
+    return max(2, int(round((tets / 24.0) ** (1.0 / 3.0))))
+
+
+def _profile(z, length, radius, end_radius):
+    """Spindle radius r(z) and its derivative."""
+    s = np.sin(np.pi * z / length)
+    r = end_radius + (radius - end_radius) * s
+    dr = (radius - end_radius) * np.cos(np.pi * z / length) * np.pi / length
+    return r, dr
+
+
+def fusiform(resolution: int = 6, *, tets: int | None = None, length: float = 10.0, radius: float = 1.5,
+             end_radius: float = 0.5, tendon_fraction: float = 0.12) -> FusiformMesh:
+    """A spindle-shaped muscle along +z with tendon caps at both ends.
+
+    resolution       cross-section cells per side (the axis gets 4x as many)
+    tets             if given, choose the resolution giving about this many tets
+    length, radius   muscle length and belly radius; end_radius at the ends
+    tendon_fraction  fraction of the length at each end that is tendon
+    """
+    if tets is not None:
+        resolution = resolution_for_tets(tets)
+    r = int(resolution)
+    if r < 1:
+        raise ValueError(f"resolution must be >= 1, got {resolution}")
+    if not (0 <= tendon_fraction < 0.5):
+        raise ValueError("tendon_fraction must lie in [0, 0.5)")
+    if not (0 < end_radius <= radius):
+        raise ValueError("need 0 < end_radius <= radius")
+    nx, nz = r, 4 * r
+    u = np.linspace(-1.0, 1.0, nx + 1)
+    w = np.linspace(0.0, length, nz + 1)
+    U, Vv, Z = np.meshgrid(u, u, w, indexing="ij")
+    # elliptical grid mapping: square [-1,1]^2 -> unit disk
+    dx = U * np.sqrt(1.0 - Vv ** 2 / 2.0)
+    dy = Vv * np.sqrt(1.0 - U ** 2 / 2.0)
+    rad, _ = _profile(Z, length, radius, end_radius)
+    points = np.stack([dx * rad, dy * rad, Z], axis=-1).reshape(-1, 3)
+
+    def vid(i, j, k):
+        return (i * (nx + 1) + j) * (nz + 1) + k
+
+    I, J, K = np.meshgrid(np.arange(nx), np.arange(nx), np.arange(nz), indexing="ij")
+    I, J, K = I.ravel(), J.ravel(), K.ravel()
+    corners = {}
+    for b in range(8):
+        di, dj, dk = (b >> 0) & 1, (b >> 1) & 1, (b >> 2) & 1
+        corners[(di, dj, dk)] = vid(I + di, J + dj, K + dk)
+    tets = []
+    for perm in permutations(range(3)):
+        path = [(0, 0, 0)]
+        cur = [0, 0, 0]
+        for axis in perm:
+            cur[axis] = 1
+            path.append(tuple(cur))
+        tets.append(np.stack([corners[c] for c in path], axis=1))
+    tets = np.concatenate(tets, axis=0).astype(np.int64)
+    # orient positively
+    p = points[tets]
+    vol = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+    neg = vol < 0
+    tets[neg] = tets[neg][:, [0, 2, 1, 3]]
+    # fibres: tangent of the meridian through the centroid, d/dz (s r(z) e_rho, z)
+    c = points[tets].mean(axis=1)
+    rc, drc = _profile(c[:, 2], length, radius, end_radius)
+    rho = np.hypot(c[:, 0], c[:, 1])
+    s = rho / rc
+    with np.errstate(invalid="ignore", divide="ignore"):
+        er = np.where(rho[:, None] > 0, c[:, :2] / rho[:, None], 0.0)
+    fib = np.column_stack([s * drc * er[:, 0], s * drc * er[:, 1], np.ones(len(c))])
+    fib /= np.linalg.norm(fib, axis=1, keepdims=True)
+    cap = tendon_fraction * length
+    is_tendon = (c[:, 2] < cap) | (c[:, 2] > length - cap)
+    zs = points[:, 2]
+    return FusiformMesh(points=points, tets=tets, fibers=fib, is_tendon=is_tendon,
+                        proximal=np.flatnonzero(np.isclose(zs, 0.0)),
+                        distal=np.flatnonzero(np.isclose(zs, length)), length=length)
