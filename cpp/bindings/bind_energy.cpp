@@ -19,6 +19,10 @@ void bind_energy(py::module_& m) {
   m.def("fiber_energy", &fiber::energy, py::arg("F"), py::arg("u"), py::arg("a"));
   m.def("fiber_stress", &fiber::stress, py::arg("F"), py::arg("u"), py::arg("a"));
   m.def("fiber_hessian", &fiber::hessian, py::arg("u"), py::arg("a"));
-  m.def("psd_project9", &psd_project<9>, py::arg("H"), "clamp negative eigenvalues of a symmetric 9x9 matrix");
+  m.def(
+      "psd_project9",
+      [](const Mat9& H, bool reflect) { return psd_project<9>(H, reflect ? EigenFilter::Abs : EigenFilter::Clamp); },
+      py::arg("H"), py::arg("reflect") = false,
+      "PSD projection of a symmetric 9x9 matrix: negative eigenvalues clamped to 0 (or reflected)");
 }
 }  // namespace emu::bindings

@@ -47,7 +47,9 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("rtol_grad", &SolverOptions::rtol_grad)
       .def_readwrite("rtol_energy", &SolverOptions::rtol_energy)
       .def_readwrite("armijo", &SolverOptions::armijo)
-      .def_readwrite("max_backtracks", &SolverOptions::max_backtracks);
+      .def_readwrite("max_backtracks", &SolverOptions::max_backtracks)
+      .def_readwrite("eigen_filter", &SolverOptions::eigen_filter)
+      .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite);
 
   py::enum_<EmuStep>(m, "EmuStep").value("woodbury", EmuStep::Woodbury).value("newton_krylov", EmuStep::NewtonKrylov);
 
@@ -57,7 +59,8 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("modes", &EmuOptions::modes)
       .def_readwrite("step", &EmuOptions::step)
       .def_readwrite("cg_max_iterations", &EmuOptions::cg_max_iterations)
-      .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max);
+      .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max)
+      .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh);
 
   py::class_<SolveResult>(m, "SolveResult")
       .def_readonly("positions", &SolveResult::positions)
@@ -98,9 +101,11 @@ void bind_solvers(py::module_& m) {
       .def("energy", &EmuSolver::energy, py::arg("load"), py::arg("F"), gil())
       .def("gradient", &EmuSolver::gradient, py::arg("load"), py::arg("F"), gil())
       .def("fit_positions", &EmuSolver::fit_positions, py::arg("load"), py::arg("F"), gil())
-      .def("hessian_product", &EmuSolver::hessian_product, py::arg("load"), py::arg("F"), py::arg("V"), gil())
+      .def("hessian_product", &EmuSolver::hessian_product, py::arg("load"), py::arg("F"), py::arg("V"),
+           py::arg("exact") = false, gil())
       .def("woodbury_solve", &EmuSolver::woodbury_solve, py::arg("load"), py::arg("F"), py::arg("R"), gil())
-      .def("block_hessians", &EmuSolver::block_hessians, py::arg("load"), py::arg("F"), gil())
+      .def("block_hessians", &EmuSolver::block_hessians, py::arg("load"), py::arg("F"), py::arg("exact") = false,
+           gil())
       .def("mode_matrix", &EmuSolver::mode_matrix)
       .def("mode_values", &EmuSolver::mode_values)
       .def_property_readonly("modes", &EmuSolver::modes)

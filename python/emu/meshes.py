@@ -1,8 +1,10 @@
 """Procedural meshes: a fusiform (spindle) muscle with tendon caps.
 
-The mesh is a structured grid: a square cross-section grid mapped onto a disk
-(elliptical grid mapping), swept along the muscle axis (z) with a spindle
-radius profile; every hex is split into six tets around its main diagonal
+The mesh is a structured grid: a square cross-section grid mapped onto a
+rounded square (a blend between the square and its circumscribed circle that
+keeps the corner cells from flattening: minimum tet quality stays above 0.1 at
+every resolution, where a full disk mapping makes slivers), swept along the
+muscle axis (z) with a spindle radius profile; every hex is split into six tets around its main diagonal
 (Kuhn subdivision, conforming across hexes). About ``24 r^3`` tets for
 resolution ``r`` (r=4: 1.5k tets, r=10: 24k, r=15: 81k, r=29: 585k).
 """
@@ -14,6 +16,8 @@ from itertools import permutations
 import numpy as np
 
 __all__ = ["FusiformMesh", "fusiform", "resolution_for_tets"]
+
+ROUNDING = 0.6  # 0: square cross-section, 1: disk (slivers at the corners)
 
 
 @dataclass
@@ -64,9 +68,12 @@ def fusiform(resolution: int = 6, *, tets: int | None = None, length: float = 10
     u = np.linspace(-1.0, 1.0, nx + 1)
     w = np.linspace(0.0, length, nz + 1)
     U, Vv, Z = np.meshgrid(u, u, w, indexing="ij")
-    # elliptical grid mapping: square [-1,1]^2 -> unit disk
-    dx = U * np.sqrt(1.0 - Vv ** 2 / 2.0)
-    dy = Vv * np.sqrt(1.0 - U ** 2 / 2.0)
+    # square [-1,1]^2 -> rounded square: scale each point toward the circle by
+    # a weight that grows from 0 at the centre to ROUNDING on the boundary
+    rs, re = np.maximum(np.abs(U), np.abs(Vv)), np.hypot(U, Vv)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.where(re > 0, 1.0 - ROUNDING * rs ** 2 * (1.0 - rs / re), 1.0)
+    dx, dy = U * f, Vv * f
     rad, _ = _profile(Z, length, radius, end_radius)
     points = np.stack([dx * rad, dy * rad, Z], axis=-1).reshape(-1, 3)
 

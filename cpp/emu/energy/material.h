@@ -26,8 +26,16 @@ inline Mat3 material_stress(const TetMaterial& m, const Mat3& F) {
   return P;
 }
 
-inline Mat9 material_hessian_psd(const TetMaterial& m, const Mat3& F) {
-  Mat9 H = psd_project<9>(snh::hessian(F, m.mu, m.lambda));
+inline Mat9 material_hessian_psd(const TetMaterial& m, const Mat3& F,
+                                 EigenFilter filter = EigenFilter::Clamp) {
+  Mat9 H = psd_project<9>(snh::hessian(F, m.mu, m.lambda), filter);
+  if (m.activation != 0.0) H += fiber::hessian(m.fiber, m.activation);
+  return H;
+}
+
+/// The unfiltered Hessian (may be indefinite).
+inline Mat9 material_hessian(const TetMaterial& m, const Mat3& F) {
+  Mat9 H = snh::hessian(F, m.mu, m.lambda);
   if (m.activation != 0.0) H += fiber::hessian(m.fiber, m.activation);
   return H;
 }

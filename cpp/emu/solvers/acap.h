@@ -36,6 +36,14 @@ class AcapOperator {
   /// y = L^-1 b for the free rows: b, y are num_free by 3 (column-major).
   void solve(const Eigen::MatrixX3d& b, Eigen::MatrixX3d& y) const { factor_.solve(b.data(), y.data(), 3); }
 
+  /// y = C D: the right-hand side sum_t w_t V_t D_t b_a per free vertex a
+  /// (num_free by 3) for per-tet matrices D (9 x #T).
+  void apply_C(const Mat9X& D, Eigen::MatrixX3d& y) const;
+
+  /// out_t = w_t V_t F_t(u) (= C^T u) for a displacement u of the free vertices
+  /// (num_free by 3; pinned vertices do not move).
+  void apply_CT(const Eigen::MatrixX3d& u, Mat9X& out) const;
+
   /// Writes the free rows of x from a num_free by 3 block.
   void scatter_free(const Eigen::MatrixX3d& y, Eigen::MatrixX3d& x) const;
 

@@ -33,7 +33,7 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   const int ks = std::min((emu_.modes + 2) / 3, disc_.num_free);
   const Modes modes = lowest_modes(acap_->factor(), ks);
   modes_seconds_ = seconds_since(t0);
-  woodbury_ = std::make_unique<Woodbury>(model_, disc_, modes, acap_->weight_volume(), emu_.alpha);
+  woodbury_ = std::make_unique<Woodbury>(model_, disc_, *acap_, modes, emu_.alpha);
   tet_energy_.resize(model_.tets.rows());
 }
 
@@ -105,16 +105,29 @@ void EmuSolver::gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx,
   }
 }
 
-void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>& A) const {
+void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>* A,
+                            std::vector<Mat9>* A_exact) const {
+  // A_t = V_t d2Psi/dF2 + alpha w_t V_t I: PSD-filtered (A) and/or unfiltered (A_exact).
+  const EigenFilter filter = options_.eigen_filter == 1 ? EigenFilter::Abs : EigenFilter::Clamp;
   const Eigen::Index m = model_.tets.rows();
   const auto& V = disc_.geometry.volume;
   const auto& wv = acap_->weight_volume();
-  A.resize(m);
+  if (A) A->resize(m);
+  if (A_exact) A_exact->resize(m);
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
-    const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
-    A[t] = V(t) * material_hessian_psd(mat, unflatten(F.col(t)));
-    A[t].diagonal().array() += emu_.alpha * wv(t);
+    const Mat3 Ft = unflatten(F.col(t));
+    const Mat9 H = snh::hessian(Ft, model_.mu(t), model_.lambda(t));
+    Mat9 fib = Mat9::Zero();
+    if (c.act(t) != 0.0) fib = fiber::hessian(model_.fiber.row(t).transpose(), c.act(t));
+    if (A) {
+      (*A)[t] = V(t) * (psd_project<9>(H, filter) + fib);
+      (*A)[t].diagonal().array() += emu_.alpha * wv(t);
+    }
+    if (A_exact) {
+      (*A_exact)[t] = V(t) * (H + fib);
+      (*A_exact)[t].diagonal().array() += emu_.alpha * wv(t);
+    }
   }
 }
 
@@ -169,12 +182,12 @@ Eigen::MatrixX3d EmuSolver::fit_positions(const LoadCase& load, const Eigen::Mat
 }
 
 Eigen::MatrixXd EmuSolver::hessian_product(const LoadCase& load, const Eigen::MatrixXd& Frows,
-                                           const Eigen::MatrixXd& Vrows) const {
+                                           const Eigen::MatrixXd& Vrows, bool exact) const {
   const Context c = make_context(load);
-  std::vector<Mat9> A;
-  blocks_into(c, to_cols(Frows), A);
+  std::vector<Mat9> A, A_exact;
+  blocks_into(c, to_cols(Frows), &A, &A_exact);
   Mat9X out;
-  hessian_product_into(A, to_cols(Vrows), out);
+  hessian_product_into(exact ? A_exact : A, to_cols(Vrows), out);
   return out.transpose();
 }
 
@@ -182,7 +195,7 @@ Eigen::MatrixXd EmuSolver::woodbury_solve(const LoadCase& load, const Eigen::Mat
                                           const Eigen::MatrixXd& Rrows) const {
   const Context c = make_context(load);
   std::vector<Mat9> A;
-  blocks_into(c, to_cols(Frows), A);
+  blocks_into(c, to_cols(Frows), &A, nullptr);
   Woodbury w = *woodbury_;
   if (!w.update(A)) throw std::runtime_error("Woodbury system X is not positive definite");
   Mat9X out;
@@ -190,10 +203,11 @@ Eigen::MatrixXd EmuSolver::woodbury_solve(const LoadCase& load, const Eigen::Mat
   return out.transpose();
 }
 
-Eigen::MatrixXd EmuSolver::block_hessians(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
+Eigen::MatrixXd EmuSolver::block_hessians(const LoadCase& load, const Eigen::MatrixXd& Frows, bool exact) const {
   const Context c = make_context(load);
-  std::vector<Mat9> A;
-  blocks_into(c, to_cols(Frows), A);
+  std::vector<Mat9> A_filtered, A_exact;
+  blocks_into(c, to_cols(Frows), &A_filtered, &A_exact);
+  const std::vector<Mat9>& A = exact ? A_exact : A_filtered;
   Eigen::MatrixXd out(A.size(), 81);
   for (size_t t = 0; t < A.size(); ++t) out.row(t) = Eigen::Map<const Eigen::Matrix<double, 1, 81>>(A[t].data());
   return out;
@@ -230,10 +244,24 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     res.converged = true;
     res.status = "converged: initial state is in equilibrium";
   }
-  std::vector<Mat9> A;
+  std::vector<Mat9> A, A_exact;
+  const bool exact = options_.exact_when_definite && emu_.step == EmuStep::NewtonKrylov;
+  // With exact Hessian products the Woodbury preconditioner may lag: it is
+  // rebuilt (eigen-filtered blocks, SYRK) every preconditioner_refresh
+  // iterations, or sooner when CG slows down by half since the last rebuild.
+  int since_refresh = 0, cg_after_refresh = -1, last_cg = 0;
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
-    blocks_into(c, F, A);
-    woodbury_->update(A);
+    const bool refresh = !exact || it == 1 || since_refresh >= emu_.preconditioner_refresh ||
+                         (cg_after_refresh >= 0 && last_cg > 1.5 * cg_after_refresh + 5);
+    if (refresh) {
+      blocks_into(c, F, &A, exact ? &A_exact : nullptr);
+      woodbury_->update(A);
+      since_refresh = 0;
+      cg_after_refresh = -1;
+    } else {
+      blocks_into(c, F, nullptr, &A_exact);
+    }
+    ++since_refresh;
     int cg_its = 0;
     if (emu_.step == EmuStep::Woodbury) {
       woodbury_->apply(g, d);
@@ -247,7 +275,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       p = z;
       double rz = dot(r, z);
       for (int i = 0; i < emu_.cg_max_iterations; ++i) {
-        hessian_product_into(A, p, Hp);
+        hessian_product_into(exact ? A_exact : A, p, Hp);
         const double pHp = dot(p, Hp);
         if (!(pHp > 0)) {  // no curvature along p: keep what we have
           if (i == 0) d = z;
@@ -295,6 +323,8 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     gn = g.norm();
     res.iterations = it;
     res.cg_iterations += cg_its;
+    last_cg = cg_its;
+    if (cg_after_refresh < 0) cg_after_refresh = cg_its;
     res.history.push_back({it, E, gn, ls.step, seconds_since(t0), cg_its, ls.backtracks});
     if (conv.test(E_prev, E, gn)) {
       res.converged = true;

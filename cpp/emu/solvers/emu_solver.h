@@ -32,12 +32,13 @@ class EmuSolver {
   double energy(const LoadCase& load, const Eigen::MatrixXd& F) const;
   Eigen::MatrixXd gradient(const LoadCase& load, const Eigen::MatrixXd& F) const;
   Eigen::MatrixX3d fit_positions(const LoadCase& load, const Eigen::MatrixXd& F) const;
-  /// Exact Hessian (PSD-projected material blocks) times V.
-  Eigen::MatrixXd hessian_product(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& V) const;
+  /// Exact Hessian times V: material blocks PSD-filtered, or unfiltered with exact = true.
+  Eigen::MatrixXd hessian_product(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& V,
+                                  bool exact = false) const;
   /// H_k^-1 R with the solver's k modes.
   Eigen::MatrixXd woodbury_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R) const;
-  /// Blocks A_t, #T by 81 (column-major 9x9 per row).
-  Eigen::MatrixXd block_hessians(const LoadCase& load, const Eigen::MatrixXd& F) const;
+  /// Blocks A_t, #T by 81 (column-major 9x9 per row); filtered unless exact.
+  Eigen::MatrixXd block_hessians(const LoadCase& load, const Eigen::MatrixXd& F, bool exact = false) const;
   Eigen::MatrixXd mode_matrix() const { return woodbury_->dense_B(); }
   Eigen::VectorXd mode_values() const { return woodbury_->lambda(); }
 
@@ -55,7 +56,7 @@ class EmuSolver {
   double energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
                       const Mat9X* Fd, double s) const;
   void gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx, Mat9X& g) const;
-  void blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>& A) const;
+  void blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>* A, std::vector<Mat9>* A_exact) const;
   void hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) const;
   void fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const;
   void fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const;

@@ -63,13 +63,15 @@ void FemSolver::free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x,
       if (disc_.free_index(v) >= 0) g.segment<3>(3 * disc_.free_index(v)) -= disc_.lumped_mass(v) * load.gravity;
 }
 
-void FemSolver::assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act) {
+void FemSolver::assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, bool exact) {
+  const EigenFilter filter = options_.eigen_filter == 1 ? EigenFilter::Abs : EigenFilter::Clamp;
   const Eigen::Index m = model_.tets.rows();
   const auto& geo = disc_.geometry;
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
     const TetMaterial mat{model_.mu(t), model_.lambda(t), act(t), model_.fiber.row(t).transpose()};
-    const Mat9 H = material_hessian_psd(mat, deformation_gradient(geo.grad[t], x, model_.tets, t));
+    const Mat3 F = deformation_gradient(geo.grad[t], x, model_.tets, t);
+    const Mat9 H = exact ? material_hessian(mat, F) : material_hessian_psd(mat, F, filter);
     Eigen::Map<Mat12>(element_.data() + t * 144) = geo.volume(t) * position_hessian(geo.grad[t], H);
   }
   pattern_.assemble(element_.data(), values_.data());
@@ -120,8 +122,22 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
     res.status = "converged: initial state is in equilibrium";
   }
   Eigen::VectorXd d(nf * 3);
+  int exact_steps = 0;
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
-    assemble_hessian(x, act);
+    if (options_.exact_when_definite) {
+      // Newton with the true Hessian where it is definite (near a stable equilibrium).
+      assemble_hessian(x, act, true);
+      if (factor_.factorize(values_.data())) {
+        factor_.solve(g.data(), d.data(), 1);
+        d = -d;
+        if (g.dot(d) < 0) {
+          ++exact_steps;
+          goto have_direction;
+        }
+      }
+    }
+    {
+    assemble_hessian(x, act, false);
     bool ok = factor_.factorize(values_.data());
     // Projected element Hessians make H PSD; a pinned scene makes it definite.
     // Roundoff can still break the Cholesky: shift the diagonal and retry.
@@ -140,6 +156,8 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
     }
     factor_.solve(g.data(), d.data(), 1);
     d = -d;
+    }
+  have_direction:
     const double slope = g.dot(d);
     if (!(slope < 0)) {
       res.status = "Newton direction is not a descent direction";

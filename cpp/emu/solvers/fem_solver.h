@@ -31,7 +31,7 @@ class FemSolver {
   void free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x, const Eigen::VectorXd& act,
                      Eigen::VectorXd& g) const;
   double energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const Eigen::Vector3d& grav) const;
-  void assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act);
+  void assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, bool exact);
 
   Model model_;
   Discretization disc_;

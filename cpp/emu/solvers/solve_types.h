@@ -16,6 +16,12 @@ struct SolverOptions {
   double rtol_energy = 1e-10;  // E_{k-1} - E_k <= rtol_energy (E_0 - E_k)
   double armijo = 1e-4;        // sufficient-decrease constant
   int max_backtracks = 40;     // step halvings before the line search gives up
+  // Element Hessians: negative eigenvalues clamped (0) or reflected (1); see psd_project.h.
+  int eigen_filter = 0;
+  // Try the unfiltered Hessian first when it is positive definite (FEM: the
+  // Cholesky succeeds; EMU: CG sees no negative curvature); fall back to the
+  // filtered one. Restores Newton's quadratic end game.
+  bool exact_when_definite = true;
 };
 
 enum class EmuStep { Woodbury, NewtonKrylov };
@@ -26,6 +32,7 @@ struct EmuOptions {
   EmuStep step = EmuStep::NewtonKrylov;
   int cg_max_iterations = 500;   // per Newton-Krylov step
   double cg_forcing_max = 0.5;   // Eisenstat-Walker eta_k = min(max, sqrt(|g_k| / |g_0|))
+  int preconditioner_refresh = 3;  // Newton-Krylov: rebuild the Woodbury preconditioner every n steps
 };
 
 struct IterationRecord {

@@ -9,13 +9,15 @@
 // every step is a descent direction.
 //
 // Modes of K = L (x) I_3 come in triples: scalar mode psi_l of L in coordinate
-// c is mode index c + 3 l. For tet t let g_tl = sum_a psi_l[v_a] b_a (the
-// gradient of psi_l on t); then B_t[(c,l), c + 3 j] = w_t V_t g_tl[j], so
-// B_t z = w_t V_t Z_t [g_t0 .. g_t,ks-1] (Z_t = unflatten z) needs no k x 9 storage.
+// c is mode index c + 3 l. B is never stored: B z = Psi^T (C z) and
+// B^T s = C^T (Psi S) go through vertex space (a gather and two thin GEMMs),
+// far cheaper per application than per-tet k x 9 blocks. Only forming X needs
+// the per-tet blocks B_t[(c,l), c + 3 j] = w_t V_t g_tl[j] with
+// g_tl = sum_a psi_l[v_a] b_a, computed on the fly.
 #include <vector>
 
-#include <Eigen/Core>
 #include <Eigen/Cholesky>
+#include <Eigen/Core>
 
 #include "emu/energy/types.h"
 #include "emu/linalg/modes.h"
@@ -27,13 +29,11 @@ namespace emu {
 class Woodbury {
  public:
   /// modes  scalar modes of L (num_free by ks) and their eigenvalues
-  /// wv     w_t V_t per tet
-  Woodbury(const Model& model, const Discretization& disc, const Modes& modes, const Eigen::VectorXd& wv,
+  Woodbury(const Model& model, const Discretization& disc, const AcapOperator& acap, const Modes& modes,
            double alpha);
 
-  /// Factor the blocks A_t (9 x 9 each, column-major, #T of them) and form X
-  /// with one symmetric rank update (SYRK). Returns false if X is not SPD
-  /// (then apply() falls back to A^-1).
+  /// Invert the blocks A_t (#T of them, SPD) and form X with one symmetric
+  /// rank update (SYRK). Returns false if X is not SPD (apply() then uses A^-1).
   bool update(const std::vector<Mat9>& A);
 
   /// out = H_k^-1 r; r, out are 9 x #T.
@@ -45,18 +45,19 @@ class Woodbury {
   Eigen::VectorXd lambda() const;
 
  private:
-  void B_times(const Mat9X& z, Eigen::VectorXd& out) const;  // out = B z
+  /// g_tl for every l, as the columns of a 3 x ks matrix.
+  void mode_gradients(Eigen::Index t, Eigen::Matrix<double, 3, Eigen::Dynamic>& g) const;
 
+  const Model& model_;
+  const Discretization& disc_;
+  const AcapOperator& acap_;
   int ks_;
   double alpha_;
-  Eigen::VectorXd values_;     // ks scalar eigenvalues
-  Eigen::MatrixXd mode_grad_;  // 3 ks x #T: column t holds g_tl (rows 3l..3l+2)
-  Eigen::VectorXd wv_;
-  std::vector<Mat9> L_;        // lower Cholesky factors of the A_t
+  Eigen::VectorXd values_;  // ks scalar eigenvalues
+  Eigen::MatrixXd psi_;     // num_free x ks scalar modes
+  std::vector<Mat9> Ainv_;  // A_t^-1 (explicit: one 9x9 product per application)
   Eigen::LLT<Eigen::MatrixXd> X_llt_;
   bool x_ok_ = false;
-  mutable Mat9X z_;
-  mutable Eigen::VectorXd t_, s_;
 };
 
 }  // namespace emu

@@ -1,0 +1,133 @@
+"""Rest-mesh checks: orientation, degenerate and sliver tets, unused vertices.
+
+Real meshes (TetWild, gmsh, the authors' research code) arrive with defects;
+these checks report them, fix what has one right fix (vertex order), and
+refuse what cannot be simulated (NaN, bad indices, zero-volume tets).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["MeshReport", "check_mesh", "tet_quality", "signed_volumes", "connected_components"]
+
+SLIVER_QUALITY = 0.05
+
+
+def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """points  (n, 3); tets  (m, 4) -> (m,) signed volumes."""
+    p = points[tets]
+    return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+
+
+def tet_quality(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Volume over RMS edge length cubed, scaled so a regular tet scores 1 (m,)."""
+    p = points[tets]
+    edges = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    l2 = np.mean([np.sum((p[:, a] - p[:, b]) ** 2, axis=1) for a, b in edges], axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = 6.0 * np.sqrt(2.0) * np.abs(signed_volumes(points, tets)) / l2 ** 1.5
+    return np.nan_to_num(q, nan=0.0)
+
+
+@dataclass
+class MeshReport:
+    num_vertices: int
+    num_tets: int
+    reoriented: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # tet ids flipped
+    slivers: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))     # quality < 0.05
+    min_quality: float = 1.0
+    unused_vertices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    def lines(self) -> list[str]:
+        out = [f"{self.num_vertices} vertices, {self.num_tets} tets, min quality {self.min_quality:.3g}"]
+        if len(self.reoriented):
+            out.append(f"{len(self.reoriented)} tet(s) had negative volume (wrong vertex order) and were "
+                       f"reoriented: {self.reoriented[:10].tolist()}")
+        if len(self.slivers):
+            out.append(f"{len(self.slivers)} sliver tet(s) with quality < {SLIVER_QUALITY}: "
+                       f"{self.slivers[:10].tolist()} (they solve, but stiffen the mesh locally)")
+        if len(self.unused_vertices):
+            out.append(f"{len(self.unused_vertices)} vertex/vertices belong to no tet and are ignored")
+        return out
+
+
+def _as_arrays(points, tets):
+    try:
+        points = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"points must be a numeric (n, 3) array: {e}") from None
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points must have shape (n, 3), got {points.shape}")
+    t = np.asarray(tets)
+    if t.ndim != 2 or t.shape[1] != 4:
+        raise ValueError(f"tets must have shape (m, 4), got {t.shape}")
+    if t.size and not np.issubdtype(t.dtype, np.integer):
+        if not np.all(np.equal(np.mod(t, 1), 0)):
+            raise ValueError("tets must hold integer vertex indices")
+    return points, t.astype(np.int64)
+
+
+def check_mesh(points, tets):
+    """Validate and repair a rest mesh.
+
+    points  (n, 3) rest positions;  tets  (m, 4) vertex indices.
+    Returns (points, tets, report) with negative-volume tets reoriented.
+    Raises ValueError for NaN/inf, out-of-range or repeated indices and
+    zero-volume tets.
+    """
+    points, tets = _as_arrays(points, tets)
+    n, m = len(points), len(tets)
+    if n == 0 or m == 0:
+        raise ValueError(f"the mesh is empty ({n} points, {m} tets)")
+    if not np.all(np.isfinite(points)):
+        bad = np.flatnonzero(~np.all(np.isfinite(points), axis=1))
+        raise ValueError(f"points contain NaN or inf at vertices {bad[:10].tolist()}; fix the mesh file")
+    if tets.min() < 0 or tets.max() >= n:
+        raise ValueError(f"tet indices must lie in [0, {n}), got range [{tets.min()}, {tets.max()}]"
+                         " (1-based indices? subtract 1)")
+    s = np.sort(tets, axis=1)
+    rep = np.flatnonzero(np.any(s[:, 1:] == s[:, :-1], axis=1))
+    if len(rep):
+        raise ValueError(f"{len(rep)} tet(s) repeat a vertex, e.g. tet {rep[0]} = {tets[rep[0]].tolist()}")
+    vol = signed_volumes(points, tets)
+    scale = np.linalg.norm(points.max(0) - points.min(0)) ** 3
+    degenerate = np.flatnonzero(np.abs(vol) <= 1e-14 * scale)
+    if len(degenerate):
+        raise ValueError(f"{len(degenerate)} tet(s) have zero volume (e.g. tet {degenerate[0]}); remove them "
+                         "or re-tetrahedralise")
+    tets = tets.copy()
+    neg = np.flatnonzero(vol < 0)
+    tets[neg] = tets[neg][:, [0, 2, 1, 3]]
+    q = tet_quality(points, tets)
+    used = np.zeros(n, bool)
+    used[tets.ravel()] = True
+    report = MeshReport(num_vertices=n, num_tets=m, reoriented=neg, slivers=np.flatnonzero(q < SLIVER_QUALITY),
+                        min_quality=float(q.min()), unused_vertices=np.flatnonzero(~used))
+    return points, tets, report
+
+
+def connected_components(num_vertices: int, tets: np.ndarray) -> np.ndarray:
+    """Component label per vertex of the tet graph (unused vertices get their own)."""
+    parent = np.arange(num_vertices)
+
+    def find(a):
+        while True:
+            pa = parent[a]
+            gp = parent[pa]
+            if np.array_equal(pa, gp):
+                return pa
+            parent[a] = gp
+            a = gp
+
+    # vectorised union-find by repeated pointer jumping over the edges
+    edges = np.concatenate([tets[:, [0, k]] for k in (1, 2, 3)], axis=0)
+    while True:
+        ra, rb = find(edges[:, 0]), find(edges[:, 1])
+        diff = ra != rb
+        if not diff.any():
+            break
+        lo, hi = np.minimum(ra[diff], rb[diff]), np.maximum(ra[diff], rb[diff])
+        parent[hi] = lo
+    return find(np.arange(num_vertices))

@@ -1,0 +1,159 @@
+"""The ``emu`` command line.
+
+    emu demo [--out DIR] [--tets N] [--threads T] [--woodbury]
+    emu solve MESH --activation NAME=A [NAME=A ...] [--method emu|fem] [--out FILE.vtu]
+    emu info [MESH]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import warnings
+
+import numpy as np
+
+
+def _print_info(args):
+    import emu
+
+    i = emu.info()
+    print(f"emu {i['version']}")
+    print(f"BLAS: {i['config']}")
+    print(f"      {i['library']}, {i['blas_threads']} thread(s); OpenMP: {i['omp_threads']} thread(s)")
+    if args.mesh:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = emu.io.load_scene(args.mesh, warn=False)
+        print(scene)
+        for line in scene.mesh_report.lines():
+            print("  " + line)
+        for p in scene.parts.values():
+            print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}")
+        ids, _ = scene.model_pins()
+        print(f"  fixed vertices (pins, fixed bones): {len(ids)}")
+        m, n = len(scene.model_tets), len(scene.points)
+        print(f"  memory estimate: FEM ~{(m * 144 * 8 + n * 3 * 60 * 8) / 2**20:.0f} MiB, "
+              f"EMU ~{(m * 9 * 8 * 12 + m * 81 * 8 * 2) / 2**20:.0f} MiB plus the factor")
+    return 0
+
+
+def _demo(args):
+    import emu
+    from emu.meshes import fusiform
+
+    if args.threads:
+        emu._core.set_threads(args.threads)
+    os.makedirs(args.out, exist_ok=True)
+    m = fusiform(tets=args.tets)
+    scene = emu.Scene(m.points, m.tets)
+    scene.add_muscle("belly", ~m.is_tendon, m.fibers[~m.is_tendon])
+    scene.add_tendon("tendons", m.is_tendon)
+    scene.pin(m.proximal)
+    act = {"belly": args.activation}
+    info = emu.info()
+    print(f"emu demo: fusiform muscle, {len(scene.tets)} tets ({len(scene.parts['belly'].tets)} muscle, "
+          f"{len(scene.parts['tendons'].tets)} tendon), {len(scene.points)} vertices, proximal end pinned")
+    print(f"activation a = {args.activation:g} on the belly; threads {info['omp_threads']}; BLAS {info['config']}")
+    runs = [("fem", {})]
+    runs.append(("emu", dict(alpha=args.alpha, step="newton-krylov")))
+    if args.woodbury:
+        runs.append(("emu", dict(alpha=args.alpha, step="woodbury", max_iterations=3000)))
+    sols = []
+    for method, kw in runs:
+        t0 = time.perf_counter()
+        sol = emu.Solver(scene, method, **kw).solve(act)
+        sol.settings["activation"] = act
+        sols.append(sol)
+        path = os.path.join(args.out, f"{sol.label}.vtu")
+        emu.io.write_solution(path, scene, sol)
+        print(f"  {sol.summary()}  [{time.perf_counter() - t0:.2f} s wall] -> {path}", flush=True)
+    fem = sols[0]
+    summary = {"tets": len(scene.tets), "vertices": len(scene.points), "threads": info["omp_threads"],
+               "blas": info["config"], "activation": args.activation, "alpha": args.alpha, "results": {}}
+    length0 = m.length
+    tip = m.distal
+    for sol in sols:
+        err = emu.vertex_error(sol, fem)
+        shortening = 1.0 - float(np.mean(sol.positions[tip, 2])) / length0
+        summary["results"][sol.label] = dict(converged=sol.converged, iterations=sol.iterations,
+                                             cg_iterations=sol.cg_iterations, solve_s=sol.time_s,
+                                             setup_s=sol.setup_time_s, vertex_error_to_fem=err,
+                                             shortening=shortening)
+        if sol is not fem:
+            print(f"  {sol.label}: vertex error to FEM = {err:.2e} of the bounding-box diagonal "
+                  f"(alpha = {args.alpha:g} mu)")
+    print(f"  the muscle shortened by {100 * summary['results']['fem']['shortening']:.1f}% (FEM)")
+    with open(os.path.join(args.out, "summary.json"), "w") as f:
+        json.dump(summary, f, indent=2)
+    print(f"wrote {args.out}/*.vtu (open in ParaView; cell data part, fiber, activation, J; point data "
+          f"displacement) and summary.json")
+    return 0 if all(s.converged for s in sols if s.settings.get("step") != "woodbury") else 1
+
+
+def _parse_activation(items):
+    act = {}
+    for it in items or []:
+        if "=" not in it:
+            raise SystemExit(f"--activation expects NAME=VALUE, got {it!r}")
+        k, v = it.split("=", 1)
+        try:
+            act[k] = float(v)
+        except ValueError:
+            raise SystemExit(f"--activation {k}: {v!r} is not a number") from None
+    return act
+
+
+def _solve(args):
+    import emu
+
+    if args.threads:
+        emu._core.set_threads(args.threads)
+    scene = emu.io.load_scene(args.mesh)
+    print(scene)
+    act = _parse_activation(args.activation)
+    kw = dict(alpha=args.alpha, step=args.step) if args.method == "emu" else {}
+    sol = emu.Solver(scene, args.method, **kw).solve(act)
+    sol.settings["activation"] = act
+    print(sol.summary())
+    if args.out:
+        emu.io.write_solution(args.out, scene, sol)
+        print(f"wrote {args.out}")
+    return 0 if sol.converged else 1
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="emu", description="EMU muscle simulation (and its FEM reference)")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    d = sub.add_parser("demo", help="contract the built-in fusiform muscle with FEM and EMU, write VTU")
+    d.add_argument("--out", default="emu_out", help="output folder (default: emu_out)")
+    d.add_argument("--tets", type=int, default=8000, help="approximate tet count (default 8000)")
+    d.add_argument("--activation", type=float, default=5e4, help="absolute activation a (default 5e4)")
+    d.add_argument("--alpha", type=float, default=100.0, help="EMU alpha relative to the muscle's shear modulus")
+    d.add_argument("--threads", type=int, default=None)
+    d.add_argument("--woodbury", action="store_true", help="also run the paper's Woodbury quasi-Newton step")
+    d.set_defaults(func=_demo)
+    s = sub.add_parser("solve", help="solve a labelled mesh (fixed bones pinned) at one activation")
+    s.add_argument("mesh")
+    s.add_argument("--activation", nargs="*", help="NAME=VALUE absolute activations")
+    s.add_argument("--method", choices=["emu", "fem"], default="emu")
+    s.add_argument("--step", choices=["newton-krylov", "woodbury"], default="newton-krylov")
+    s.add_argument("--alpha", type=float, default=100.0)
+    s.add_argument("--threads", type=int, default=None)
+    s.add_argument("--out", default=None, help="write the result here (.vtu)")
+    s.set_defaults(func=_solve)
+    i = sub.add_parser("info", help="BLAS, threads; with a mesh: parts, defects, memory estimate")
+    i.add_argument("mesh", nargs="?")
+    i.set_defaults(func=_print_info)
+    args = ap.parse_args(argv)
+    try:
+        return args.func(args)
+    except (ValueError, FileNotFoundError, NotImplementedError) as e:
+        print(f"emu: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,145 @@
+"""Mesh input and output through meshio (VTU, VTK, MSH, MESH, ...).
+
+``read`` keeps only the tetrahedra and their cell data; a ``part`` label comes
+from cell data named ``part`` (the shared scenes), ``gmsh:physical`` (gmsh
+physical groups) or ``medit:ref`` (Medit references). A ``scene.json`` beside
+the file (the shared scenes' format) names the parts and their kinds.
+"""
+from __future__ import annotations
+
+import json
+import os
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["TetMesh", "read", "write", "write_solution", "load_scene"]
+
+_PART_KEYS = ("part", "gmsh:physical", "medit:ref")
+
+
+@dataclass
+class TetMesh:
+    points: np.ndarray                 # (n, 3)
+    tets: np.ndarray                   # (m, 4)
+    cell_data: dict = field(default_factory=dict)   # name -> (m, ...) arrays
+    part_names: dict = field(default_factory=dict)  # part id -> name
+    part_kinds: dict = field(default_factory=dict)  # part id -> "muscle" | "tendon" | "bone"
+
+    @property
+    def part(self) -> np.ndarray | None:
+        for k in _PART_KEYS:
+            if k in self.cell_data:
+                return np.asarray(self.cell_data[k]).astype(np.int64).ravel()
+        return None
+
+    @property
+    def fiber(self) -> np.ndarray | None:
+        f = self.cell_data.get("fiber")
+        return None if f is None else np.asarray(f, dtype=np.float64).reshape(-1, 3)
+
+
+def read(path) -> TetMesh:
+    """Read a tet mesh. Raises FileNotFoundError / ValueError with the reason."""
+    import meshio
+
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"mesh file not found: {path}")
+    try:
+        mesh = meshio.read(path)
+    except Exception as e:  # meshio raises many types for unreadable files
+        raise ValueError(f"could not read {path} as a mesh ({type(e).__name__}: {e})") from None
+    blocks = [i for i, c in enumerate(mesh.cells) if c.type == "tetra"]
+    if not blocks:
+        types = sorted({c.type for c in mesh.cells})
+        raise ValueError(f"{path} holds no tetrahedra (cell types: {types}); tetrahedralise it first "
+                         "(TetWild, gmsh -3)")
+    tets = np.concatenate([mesh.cells[i].data for i in blocks]).astype(np.int64)
+    cell_data = {}
+    for name, per_block in mesh.cell_data.items():
+        arrs = [np.asarray(per_block[i]) for i in blocks]
+        cell_data[name] = np.concatenate(arrs)
+    out = TetMesh(points=np.asarray(mesh.points, dtype=np.float64)[:, :3].copy(), tets=tets, cell_data=cell_data)
+    meta = os.path.join(os.path.dirname(path), "scene.json")
+    if os.path.exists(meta):
+        with open(meta) as f:
+            info = json.load(f)
+        for p in info.get("parts", []):
+            out.part_names[int(p["id"])] = p["name"]
+            out.part_kinds[int(p["id"])] = p.get("kind", "muscle")
+    return out
+
+
+def write(path, points, tets, *, cell_data: dict | None = None, point_data: dict | None = None):
+    """Write a tet mesh; the format follows the extension (.vtu, .vtk, .msh, .mesh, ...)."""
+    import meshio
+
+    cells = [("tetra", np.asarray(tets, dtype=np.int64))]
+    cd = {k: [np.asarray(v)] for k, v in (cell_data or {}).items()}
+    pd = {k: np.asarray(v) for k, v in (point_data or {}).items()}
+    meshio.write_points_cells(os.fspath(path), np.asarray(points, dtype=np.float64), cells,
+                              point_data=pd or None, cell_data=cd or None)
+
+
+def write_solution(path, scene, solution):
+    """A solved frame as a mesh: deformed points; point data displacement; cell
+    data part (index in scene.parts), fiber (deformed, unit), activation, J."""
+    from .checks import signed_volumes
+
+    x = solution.positions
+    part = np.full(len(scene.tets), -1, np.int32)
+    fib = np.zeros((len(scene.tets), 3))
+    act = np.zeros(len(scene.tets))
+    for i, p in enumerate(scene.parts.values()):
+        part[p.tets] = i
+        if p.fibers is not None:
+            fib[p.tets] = p.fibers
+    a = solution.settings.get("activation", {})
+    for name, v in a.items():
+        act[scene.parts[name].tets] = v
+    # deformed fibre direction F u, from the positions (both methods)
+    from ._fields import deformation_gradients
+    F = deformation_gradients(scene.points, scene.tets, x)
+    fu = np.einsum("tij,tj->ti", F, fib)
+    n = np.linalg.norm(fu, axis=1, keepdims=True)
+    fu = np.divide(fu, n, out=np.zeros_like(fu), where=n > 0)
+    J = signed_volumes(x, scene.tets) / signed_volumes(scene.points, scene.tets)
+    write(path, x, scene.tets, cell_data={"part": part, "fiber": fu, "activation": act, "J": J},
+          point_data={"displacement": x - scene.points})
+
+
+def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, fix_bones=True, warn=True):
+    """A Scene from a labelled tet mesh (the shared scenes, or any mesh with a
+    ``part`` label and ``fiber`` cell data): parts of kind ``muscle`` become
+    muscles with the file's fibres, ``tendon`` tendons, ``bone`` fixed bones
+    (their vertices pinned)."""
+    from .scene import Scene
+
+    mesh = read(path)
+    part = mesh.part
+    if part is None:
+        raise ValueError(f"{path} has no part labels (cell data 'part', 'gmsh:physical' or 'medit:ref')")
+    with warnings.catch_warnings():
+        if not warn:
+            warnings.simplefilter("ignore")
+        scene = Scene(mesh.points, mesh.tets, warn=warn)
+    fib = mesh.fiber
+    for pid in np.unique(part):
+        name = mesh.part_names.get(int(pid), f"part{pid}")
+        kind = mesh.part_kinds.get(int(pid), "muscle")
+        idx = np.flatnonzero(part == pid)
+        if kind == "muscle":
+            if fib is None:
+                raise ValueError(f"{path}: muscle part '{name}' needs 'fiber' cell data")
+            scene.add_muscle(name, idx, fib[idx], youngs=muscle_youngs, poisson=poisson)
+        elif kind == "tendon":
+            scene.add_tendon(name, idx, poisson=poisson)
+        elif kind == "bone":
+            if not fix_bones:
+                raise NotImplementedError("moving bones are not supported yet: load with fix_bones=True")
+            scene.add_bone(name, idx, youngs=bone_youngs, poisson=poisson)
+        else:
+            raise ValueError(f"{path}: part '{name}' has unknown kind '{kind}' (muscle, tendon or bone)")
+    return scene

@@ -1,0 +1,264 @@
+"""The scene: one tet mesh, its labelled parts, materials and boundary conditions."""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _core
+from .checks import MeshReport, check_mesh, connected_components
+
+__all__ = ["Scene", "Part", "lame", "MeshWarning"]
+
+
+class MeshWarning(UserWarning):
+    """A defect in the input mesh that emu repaired or that may affect results."""
+
+
+def lame(youngs: float, poisson: float) -> tuple[float, float]:
+    """(mu, lambda) from Young's modulus and Poisson ratio."""
+    if not youngs > 0:
+        raise ValueError(f"Young's modulus must be positive, got {youngs}")
+    if not 0 < poisson < 0.5:
+        raise ValueError(f"Poisson ratio must lie in (0, 0.5), got {poisson}")
+    mu = youngs / (2.0 * (1.0 + poisson))
+    lam = youngs * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson))
+    return mu, lam
+
+
+@dataclass
+class Part:
+    name: str
+    kind: str               # "muscle" or "tendon"
+    tets: np.ndarray        # tet ids
+    youngs: float
+    poisson: float
+    density: float
+    acap_weight: float
+    fibers: np.ndarray | None = None   # (len(tets), 3) unit vectors, muscles only
+    max_activation: float = 1e5        # a for normalised activation 1.0
+
+    @property
+    def mu(self) -> float:
+        return lame(self.youngs, self.poisson)[0]
+
+
+class Scene:
+    """A musculoskeletal scene on one conforming tet mesh.
+
+    points  (n, 3) rest positions; tets  (m, 4) vertex indices. Negative-volume
+    tets are reoriented and slivers reported, both with a MeshWarning; the
+    report stays in ``scene.mesh_report``.
+    """
+
+    def __init__(self, points, tets, *, warn: bool = True):
+        self.points, self.tets, self.mesh_report = check_mesh(points, tets)
+        if warn:
+            for line in self.mesh_report.lines()[1:]:
+                warnings.warn(line, MeshWarning, stacklevel=2)
+        self.parts: dict[str, Part] = {}
+        self._owner = np.full(len(self.tets), -1, np.int64)  # part index per tet
+        self.pinned = np.zeros(0, np.int64)
+        self.pin_targets = np.zeros((0, 3))
+        self.gravity = np.zeros(3)
+
+    # ----------------------------------------------------------------- parts
+    def _tet_ids(self, name, tets) -> np.ndarray:
+        idx = np.asarray(tets)
+        if idx.dtype == bool:
+            if idx.shape != (len(self.tets),):
+                raise ValueError(f"part '{name}': a boolean tet mask must have shape ({len(self.tets)},), "
+                                 f"got {idx.shape}")
+            idx = np.flatnonzero(idx)
+        idx = idx.astype(np.int64).ravel()
+        if idx.size == 0:
+            raise ValueError(f"part '{name}' has no tets")
+        if idx.min() < 0 or idx.max() >= len(self.tets):
+            raise ValueError(f"part '{name}': tet ids must lie in [0, {len(self.tets)}), got "
+                             f"[{idx.min()}, {idx.max()}]")
+        if len(np.unique(idx)) != len(idx):
+            raise ValueError(f"part '{name}' lists some tets twice")
+        taken = self._owner[idx] >= 0
+        if taken.any():
+            other = list(self.parts)[self._owner[idx[taken][0]]]
+            raise ValueError(f"part '{name}': {taken.sum()} tet(s) already belong to part '{other}'")
+        if name in self.parts:
+            raise ValueError(f"a part named '{name}' exists already")
+        return idx
+
+    def _add(self, part: Part):
+        self._owner[part.tets] = len(self.parts)
+        self.parts[part.name] = part
+        return part
+
+    def add_muscle(self, name: str, tets, fibers=None, *, youngs: float = 6e4, poisson: float = 0.49,
+                   density: float = 1060.0, max_activation: float = 1e5, acap_weight: float = 1.0) -> Part:
+        """A contractile part.
+
+        tets     tet ids (or a boolean mask over all tets)
+        fibers   (len(tets), 3) fibre directions (normalised here) or one (3,) direction for all
+        max_activation  the activation a that a normalised activation of 1 means
+        """
+        idx = self._tet_ids(name, tets)
+        lame(youngs, poisson)
+        if fibers is None:
+            raise ValueError(f"muscle '{name}' needs fibre directions (one per tet, or one for all)")
+        f = np.asarray(fibers, dtype=np.float64)
+        if f.shape == (3,):
+            f = np.tile(f, (len(idx), 1))
+        if f.shape != (len(idx), 3):
+            raise ValueError(f"muscle '{name}': fibers must have shape ({len(idx)}, 3) or (3,), got {f.shape}")
+        if not np.all(np.isfinite(f)):
+            raise ValueError(f"muscle '{name}': fibers contain NaN or inf")
+        norm = np.linalg.norm(f, axis=1)
+        if np.any(norm < 1e-12):
+            raise ValueError(f"muscle '{name}': {np.sum(norm < 1e-12)} fibre direction(s) are zero")
+        if not max_activation > 0:
+            raise ValueError(f"muscle '{name}': max_activation must be positive")
+        return self._add(Part(name, "muscle", idx, youngs, poisson, density, acap_weight, f / norm[:, None],
+                              max_activation))
+
+    def add_tendon(self, name: str, tets, *, youngs: float = 4.5e8, poisson: float = 0.49,
+                   density: float = 1100.0, acap_weight: float | None = None) -> Part:
+        """A stiff, never-activated soft part. acap_weight None: chosen from the stiffness
+        ratio to the muscles (see Solver)."""
+        idx = self._tet_ids(name, tets)
+        lame(youngs, poisson)
+        return self._add(Part(name, "tendon", idx, youngs, poisson, density,
+                              acap_weight if acap_weight is not None else np.nan))
+
+    def add_bone(self, name: str, tets, *, youngs: float = 1e10, poisson: float = 0.49,
+                 density: float = 1900.0, fixed: bool = True) -> Part:
+        """A bone. Fixed bones hold their vertices at rest: their tets carry no
+        unknowns and are left out of the solve; muscle vertices they share are
+        attachments. (Moving bones, joints between bones: not yet available.)"""
+        if not fixed:
+            raise NotImplementedError(f"bone '{name}': moving bones are not available yet; use fixed=True "
+                                      "or pin the bone's vertices along a scripted path with scene.pin")
+        idx = self._tet_ids(name, tets)
+        lame(youngs, poisson)
+        return self._add(Part(name, "bone", idx, youngs, poisson, density, 1.0))
+
+    # ------------------------------------------------------ boundary conditions
+    def pin(self, vertex_ids, positions=None):
+        """Fix vertices at their rest positions (or at ``positions``, (k, 3))."""
+        ids = np.asarray(vertex_ids).astype(np.int64).ravel()
+        if ids.size == 0:
+            raise ValueError("pin: no vertex ids given")
+        if ids.min() < 0 or ids.max() >= len(self.points):
+            raise ValueError(f"pin: vertex ids must lie in [0, {len(self.points)}), got [{ids.min()}, {ids.max()}]")
+        pos = self.points[ids] if positions is None else np.asarray(positions, dtype=np.float64)
+        if pos.shape != (len(ids), 3):
+            raise ValueError(f"pin: positions must have shape ({len(ids)}, 3), got {pos.shape}")
+        if not np.all(np.isfinite(pos)):
+            raise ValueError("pin: positions contain NaN or inf")
+        targets = dict(zip(self.pinned.tolist(), self.pin_targets))
+        targets.update(zip(ids.tolist(), pos))
+        self.pinned = np.array(sorted(targets), dtype=np.int64)
+        self.pin_targets = np.array([targets[i] for i in self.pinned]).reshape(-1, 3)
+
+    # ------------------------------------------------------------ model build
+    @property
+    def muscles(self) -> list[str]:
+        return [p.name for p in self.parts.values() if p.kind == "muscle"]
+
+    def reference_shear_modulus(self) -> float:
+        """mu of the softest muscle (softest part if there is none): alpha's unit."""
+        kinds = ([p for p in self.parts.values() if p.kind == "muscle"]
+                 or [p for p in self.parts.values() if p.kind != "bone"])
+        if not kinds:
+            raise ValueError("the scene has no parts; add muscles or tendons first")
+        return min(p.mu for p in kinds)
+
+    @property
+    def model_tets(self) -> np.ndarray:
+        """Ids of the tets that carry unknowns (all but those of fixed bones)."""
+        bone = np.zeros(len(self.tets), bool)
+        for p in self.parts.values():
+            if p.kind == "bone":
+                bone[p.tets] = True
+        return np.flatnonzero(~bone)
+
+    def model_pins(self) -> tuple[np.ndarray, np.ndarray]:
+        """(ids, targets) of every vertex the solve holds fixed: the user's pins,
+        vertices of fixed bones (at rest), and vertices of no soft tet."""
+        used = np.zeros(len(self.points), bool)
+        used[self.tets[self.model_tets].ravel()] = True
+        fixed = ~used
+        fixed[self.pinned] = True
+        for p in self.parts.values():
+            if p.kind == "bone":
+                fixed[self.tets[p.tets].ravel()] = True
+        ids = np.flatnonzero(fixed)
+        pos = self.points[ids].copy()
+        where = np.searchsorted(ids, self.pinned)
+        pos[where] = self.pin_targets
+        return ids, pos
+
+    def validate(self):
+        if not self.parts:
+            raise ValueError("the scene has no parts: add_muscle/add_tendon first")
+        free = np.flatnonzero(self._owner < 0)
+        if len(free):
+            raise ValueError(f"{len(free)} tet(s) belong to no part (e.g. tet {free[0]}); add them to a "
+                             "muscle, tendon or bone")
+        soft = self.model_tets
+        if len(soft) == 0:
+            raise ValueError("the scene has no muscle or tendon tets: nothing to simulate")
+        used = np.zeros(len(self.points), bool)
+        used[self.tets[soft].ravel()] = True
+        pins, _ = self.model_pins()
+        if not np.any(used[pins]):
+            raise ValueError("the scene is not anchored: pin some vertices (scene.pin) or attach the muscles "
+                             "to a fixed bone; without an anchor no equilibrium is unique")
+        comp = connected_components(len(self.points), self.tets[soft])
+        anchored = np.unique(comp[pins[used[pins]]])
+        loose = np.setdiff1d(np.unique(comp[used]), anchored)
+        if len(loose):
+            size = int(np.sum(comp[used] == loose[0]))
+            raise ValueError(f"{len(loose)} connected piece(s) of the mesh have no pinned vertex (one has "
+                             f"{size} vertices); pin a vertex of every piece")
+        if not np.all(np.isfinite(self.gravity)) or np.shape(self.gravity) != (3,):
+            raise ValueError(f"gravity must be a finite 3-vector, got {self.gravity!r}")
+
+    def acap_weight_of(self, part: Part) -> float:
+        """The ACAP weight of a part (tendons without an explicit weight: default_tendon_weight)."""
+        if not np.isnan(part.acap_weight):
+            return part.acap_weight
+        return default_tendon_weight(part.mu / self.reference_shear_modulus())
+
+    def build_model(self) -> "_core.Model":
+        """The flat arrays the C++ solvers take (tets of fixed bones left out)."""
+        self.validate()
+        keep = self.model_tets
+        m = len(self.tets)
+        mu, lam, rho, w = (np.empty(m) for _ in range(4))
+        fib = np.zeros((m, 3))
+        muscle = np.full(m, -1, np.int32)
+        names = self.muscles
+        for p in self.parts.values():
+            pm, pl = lame(p.youngs, p.poisson)
+            mu[p.tets], lam[p.tets], rho[p.tets] = pm, pl, p.density
+            w[p.tets] = self.acap_weight_of(p)
+            if p.kind == "muscle":
+                fib[p.tets] = p.fibers
+                muscle[p.tets] = names.index(p.name)
+        model = _core.Model()
+        model.rest = self.points
+        model.tets = self.tets[keep].astype(np.int32)
+        model.mu, model.lam, model.density, model.acap_weight = mu[keep], lam[keep], rho[keep], w[keep]
+        model.fiber = fib[keep]
+        model.muscle = muscle[keep]
+        model.pinned = self.model_pins()[0].astype(np.int32)
+        model.num_muscles = len(names)
+        return model
+
+    def __repr__(self):
+        parts = ", ".join(f"{p.name} ({p.kind}, {len(p.tets)} tets)" for p in self.parts.values())
+        return f"Scene({len(self.points)} vertices, {len(self.tets)} tets; {parts}; {len(self.pinned)} pinned)"
+
+
+def default_tendon_weight(stiffness_ratio: float) -> float:
+    """ACAP weight for a part `stiffness_ratio` times stiffer than the muscles."""
+    return float(min(max(stiffness_ratio, 1.0), 1e3) ** 0.5)

@@ -1,0 +1,208 @@
+"""Solving a scene for its quasi-static equilibrium, by FEM or by EMU."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _core
+from .scene import Scene
+
+__all__ = ["Solver", "Solution", "solve", "METHODS", "STEPS"]
+
+METHODS = ("emu", "fem")
+STEPS = ("newton-krylov", "woodbury")
+HISTORY_COLUMNS = ("iteration", "energy", "grad_norm", "step", "time_s", "cg_iterations", "backtracks")
+
+
+@dataclass
+class Solution:
+    """The result of one solve.
+
+    positions   (n, 3) equilibrium positions (EMU: the ACAP fit x*(F))
+    converged   whether the stopping test passed; status says why it stopped
+    history     dict of per-iteration arrays (entry 0 is the start): energy,
+                grad_norm, time_s (since the solve began), step, cg_iterations, backtracks
+    F           (m, 3, 3) EMU's deformation-gradient unknowns (None for FEM)
+    """
+    method: str
+    positions: np.ndarray
+    converged: bool
+    status: str
+    iterations: int
+    cg_iterations: int
+    time_s: float
+    setup_time_s: float
+    energy: float
+    grad_norm: float
+    grad_norm0: float
+    rel_energy_change: float
+    history: dict = field(repr=False)
+    F: np.ndarray | None = field(default=None, repr=False)
+    settings: dict = field(default_factory=dict)
+
+    def summary(self) -> str:
+        cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
+        state = "converged" if self.converged else f"NOT converged ({self.status})"
+        return (f"{self.label}: {state} in {self.iterations} iterations{cg}, "
+                f"{self.time_s:.3f} s (+{self.setup_time_s:.3f} s setup), |g|/|g0| = "
+                f"{self.grad_norm / self.grad_norm0 if self.grad_norm0 else 0:.2e}")
+
+    @property
+    def label(self) -> str:
+        if self.method == "emu":
+            return f"emu_{self.settings.get('step', 'newton-krylov').replace('-', '_')}"
+        return self.method
+
+
+class Solver:
+    """A solver bound to one scene: factorisation (FEM: symbolic analysis; EMU:
+    the ACAP matrix and its modes) happens once here, every ``solve`` reuses it.
+
+    method        "emu" or "fem"
+    alpha         EMU's ACAP stiffness relative to the softest muscle's shear
+                  modulus (larger: closer to FEM, more iterations)
+    modes         k, number of ACAP modes in the Woodbury term (multiple of 3)
+    step          "newton-krylov" (default) or "woodbury" (the paper's step)
+    rtol_grad     stop when |g| <= rtol_grad |g_0| ...
+    rtol_energy   ... and the last energy decrease <= rtol_energy x total decrease
+    max_iterations  per solve
+    preconditioner_refresh  Newton-Krylov: rebuild the Woodbury preconditioner every n steps
+    exact_when_definite  use the unfiltered Hessian when it is definite (see README)
+    threads       OpenMP and OpenBLAS threads (None: leave as is)
+    """
+
+    def __init__(self, scene: Scene, method: str = "emu", *, alpha: float = 100.0, modes: int = 48,
+                 step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
+                 max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner_refresh: int = 3,
+                 exact_when_definite: bool = True, threads: int | None = None):
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        if step not in STEPS:
+            raise ValueError(f"step must be one of {STEPS}, got {step!r}")
+        for name, v in (("alpha", alpha), ("rtol_grad", rtol_grad), ("rtol_energy", rtol_energy)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if int(modes) < 0:
+            raise ValueError(f"modes must be >= 0, got {modes}")
+        if threads is not None:
+            if int(threads) < 1:
+                raise ValueError(f"threads must be >= 1, got {threads}")
+            _core.set_threads(int(threads))
+        self.scene, self.method, self.step = scene, method, step
+        self.model = scene.build_model()
+        self._model_tets = scene.model_tets
+        opts = _core.SolverOptions()
+        opts.rtol_grad, opts.rtol_energy = float(rtol_grad), float(rtol_energy)
+        opts.exact_when_definite = bool(exact_when_definite)
+        if max_iterations is None:
+            max_iterations = 200 if method == "fem" else (500 if step == "newton-krylov" else 20000)
+        opts.max_iterations = int(max_iterations)
+        self.mu_ref = scene.reference_shear_modulus()
+        self.settings = dict(method=method, rtol_grad=rtol_grad, rtol_energy=rtol_energy,
+                             max_iterations=int(max_iterations))
+        if method == "fem":
+            self._core = _core.FemSolver(self.model, opts)
+        else:
+            eo = _core.EmuOptions()
+            eo.alpha = float(alpha) * self.mu_ref
+            eo.modes = int(modes)
+            eo.step = _core.EmuStep.newton_krylov if step == "newton-krylov" else _core.EmuStep.woodbury
+            eo.cg_max_iterations = int(cg_max_iterations)
+            if int(preconditioner_refresh) < 1:
+                raise ValueError(f"preconditioner_refresh must be >= 1, got {preconditioner_refresh}")
+            eo.preconditioner_refresh = int(preconditioner_refresh)
+            self._core = _core.EmuSolver(self.model, opts, eo)
+            self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step)
+        self.setup_time_s = self._core.setup_seconds
+
+    def activation_vector(self, activation=None, normalized: bool = False) -> np.ndarray:
+        """Per-muscle absolute activations from a {muscle: value} dict (missing: 0)."""
+        names = self.scene.muscles
+        a = np.zeros(len(names))
+        if activation is None:
+            return a
+        if not isinstance(activation, dict):
+            raise TypeError("activation must be a dict {muscle name: value}")
+        for name, v in activation.items():
+            if name not in names:
+                raise ValueError(f"unknown muscle '{name}'; the scene's muscles are {names}")
+            v = float(v)
+            if not math.isfinite(v) or v < 0:
+                raise ValueError(f"activation of '{name}' must be finite and >= 0, got {v}")
+            if normalized:
+                if v > 1:
+                    raise ValueError(f"normalised activation of '{name}' must lie in [0, 1], got {v}")
+                v *= self.scene.parts[name].max_activation
+            a[names.index(name)] = v
+        return a
+
+    def load_case(self, activation=None, normalized=False, gravity=None, pin_positions=None):
+        load = _core.LoadCase()
+        load.activation = self.activation_vector(activation, normalized)
+        g = self.scene.gravity if gravity is None else np.asarray(gravity, dtype=np.float64)
+        if np.shape(g) != (3,) or not np.all(np.isfinite(g)):
+            raise ValueError(f"gravity must be a finite 3-vector, got {g!r}")
+        load.gravity = g
+        ids, targets = self.scene.model_pins()
+        if pin_positions is not None:
+            pins = np.asarray(pin_positions, dtype=np.float64)
+            if pins.shape != (len(self.scene.pinned), 3):
+                raise ValueError(f"pin_positions must have shape ({len(self.scene.pinned)}, 3) (one row per "
+                                 f"scene.pinned vertex), got {pins.shape}")
+            if not np.all(np.isfinite(pins)):
+                raise ValueError("pin_positions contain NaN or inf")
+            targets = targets.copy()
+            targets[np.searchsorted(ids, self.scene.pinned)] = pins
+        load.pin_positions = targets
+        return load
+
+    def solve(self, activation=None, *, normalized: bool = False, gravity=None, pin_positions=None,
+              initial=None) -> Solution:
+        """Equilibrium under the given activations.
+
+        activation  {muscle: a} absolute activation (or in [0, 1] with normalized=True)
+        initial     warm start: a previous Solution of this solver (or, for FEM,
+                    (n, 3) positions; for EMU, (m, 3, 3) deformation gradients)
+        """
+        load = self.load_case(activation, normalized, gravity, pin_positions)
+        if initial is None:
+            r = self._core.solve(load)
+        else:
+            r = self._core.solve_from(load, self._initial_array(initial))
+        if not np.all(np.isfinite(r.positions)):
+            raise FloatingPointError("the solver produced non-finite positions; this is a bug, please report it")
+        h = np.asarray(r.history)
+        history = {name: h[:, i] for i, name in enumerate(HISTORY_COLUMNS)}
+        F = None
+        if self.method == "emu":
+            F = np.tile(np.eye(3), (len(self.scene.tets), 1, 1))  # fixed-bone tets stay at identity
+            F[self._model_tets] = np.asarray(r.F).reshape(-1, 3, 3).transpose(0, 2, 1)  # vec(F) column-major
+        return Solution(method=self.method, positions=np.asarray(r.positions), converged=bool(r.converged),
+                        status=r.status, iterations=r.iterations, cg_iterations=r.cg_iterations,
+                        time_s=r.time_s, setup_time_s=self.setup_time_s, energy=r.energy,
+                        grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
+                        history=history, F=F, settings=dict(self.settings))
+
+    def _initial_array(self, initial):
+        if isinstance(initial, Solution):
+            if initial.method != self.method:
+                raise ValueError(f"cannot warm-start a {self.method} solve from a {initial.method} solution")
+            initial = initial.F if self.method == "emu" else initial.positions
+        a = np.asarray(initial, dtype=np.float64)
+        if self.method == "fem":
+            if a.shape != self.scene.points.shape:
+                raise ValueError(f"initial positions must have shape {self.scene.points.shape}, got {a.shape}")
+            return a
+        m = len(self.scene.tets)
+        if a.shape != (m, 3, 3):
+            raise ValueError(f"initial deformation gradients must have shape ({m}, 3, 3), got {a.shape}")
+        return a[self._model_tets].transpose(0, 2, 1).reshape(-1, 9)
+
+
+def solve(scene: Scene, activation=None, method: str = "emu", *, normalized: bool = False, gravity=None,
+          initial=None, **options) -> Solution:
+    """Build a Solver for ``scene`` and solve once. options: see Solver."""
+    return Solver(scene, method, **options).solve(activation, normalized=normalized, gravity=gravity,
+                                                  initial=initial)

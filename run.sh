@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# One entry point that works on a fresh Debian machine (as root, or with sudo):
+#   bash run.sh demo [emu demo options]   install what is missing, then run the demo
+#   bash run.sh test                      install what is missing, then C++ tests (ctest) and pytest
+#   bash run.sh setup                     only install
+set -euo pipefail
+cd "$(dirname "$0")"
+
+APT_PACKAGES="build-essential cmake libeigen3-dev libsuitesparse-dev libspectra-dev libopenblas-dev"
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+PY="${PYTHON:-python3}"
+
+setup() {
+  local missing=""
+  for p in $APT_PACKAGES; do dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"; done
+  if [ -n "$missing" ]; then
+    echo "[emu] installing Debian packages:$missing"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $missing >/dev/null
+  fi
+  # CHOLMOD runs on the system BLAS: select OpenBLAS (the reference BLAS is several times slower).
+  for lib in libblas.so.3 liblapack.so.3; do
+    local alt="${lib}-$(uname -m)-linux-gnu"
+    local target="/usr/lib/$(uname -m)-linux-gnu/openblas-pthread/${lib}"
+    if [ -e "$target" ] && update-alternatives --query "$alt" >/dev/null 2>&1; then
+      $SUDO update-alternatives --set "$alt" "$target" >/dev/null
+    fi
+  done
+  "$PY" -m pip install -q --disable-pip-version-check "scikit-build-core>=0.8" "pybind11>=2.11" numpy "meshio>=5.3" \
+    pytest scipy 2>&1 | grep -v -i "warning" || true
+  echo "[emu] building and installing the emu package"
+  "$PY" -m pip install -q --disable-pip-version-check --no-build-isolation -e . 2>&1 | grep -v -i "warning" || true
+  "$PY" -c "import emu" || { echo "[emu] the package did not install"; exit 1; }
+}
+
+cpp_tests() {
+  cmake -S . -B build/ctest -DEMU_BUILD_TESTS=ON -DCMAKE_BUILD_TYPE=Release >/dev/null
+  cmake --build build/ctest -j "$(nproc)" >/dev/null
+  (cd build/ctest && ctest --output-on-failure)
+}
+
+cmd="${1:-demo}"
+shift || true
+case "$cmd" in
+  setup) setup ;;
+  demo) setup; emu demo "$@" ;;
+  test) setup; cpp_tests; "$PY" -m pytest -q tests "$@" ;;
+  *) echo "usage: bash run.sh [setup|demo|test] [options]"; exit 2 ;;
+esac

@@ -1,0 +1,81 @@
+"""Shared helpers for the emu test suite: small scenes and an independent
+numpy discretisation (G, volumes) that does not go through emu's C++ code."""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import emu
+from emu.meshes import fusiform
+
+SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def small_scene(r=2, pin="proximal", tendon_fraction=0.12, **muscle_kw):
+    """A fusiform muscle (tendon caps as a stiff tendon part, unless
+    tendon_fraction=0) pinned at its proximal end. Returns (scene, mesh)."""
+    m = fusiform(r, tendon_fraction=tendon_fraction)
+    s = emu.Scene(m.points, m.tets)
+    if m.is_tendon.any():
+        s.add_muscle("belly", ~m.is_tendon, m.fibers[~m.is_tendon], **muscle_kw)
+        s.add_tendon("tendons", m.is_tendon)
+    else:
+        s.add_muscle("belly", np.arange(len(m.tets)), m.fibers, **muscle_kw)
+    if pin == "proximal":
+        s.pin(m.proximal)
+    elif pin == "both":
+        s.pin(np.concatenate([m.proximal, m.distal]))
+    return s, m
+
+
+@pytest.fixture
+def scene2():
+    return small_scene(2)
+
+
+def rest_geometry(points, tets):
+    """Rest volumes (m,) and shape-function gradients b (m, 4, 3), from D_m^-1."""
+    p = points[tets]
+    Dm = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)  # columns are edges
+    vol = np.linalg.det(Dm) / 6.0
+    Dinv = np.linalg.inv(Dm)                      # rows are b_1, b_2, b_3
+    b = np.empty((len(tets), 4, 3))
+    b[:, 1:] = Dinv
+    b[:, 0] = -Dinv.sum(axis=1)
+    return vol, b
+
+
+def gradient_operator(points, tets):
+    """Dense G (9m x 3n) with vec(F_t) = G_t x, vec column-major
+    (F[i, k] at 9t + i + 3k) and x flattened vertex-major (x[v, i] at 3v + i)."""
+    import scipy.sparse as sp
+
+    vol, b = rest_geometry(points, tets)
+    m, n = len(tets), len(points)
+    rows, cols, vals = [], [], []
+    for a in range(4):
+        for i in range(3):
+            for k in range(3):
+                rows.append(9 * np.arange(m) + i + 3 * k)
+                cols.append(3 * tets[:, a] + i)
+                vals.append(b[:, a, k])
+    G = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(9 * m, 3 * n))
+    return G, vol
+
+
+def vecF(F):
+    """(m, 3, 3) -> (m, 9) column-major rows (the C++ layout)."""
+    return np.asarray(F).transpose(0, 2, 1).reshape(-1, 9)
+
+
+def unvecF(rows):
+    return np.asarray(rows).reshape(-1, 3, 3).transpose(0, 2, 1)
+
+
+def quiet_scene(points, tets):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", emu.MeshWarning)
+        return emu.Scene(points, tets)

@@ -1,0 +1,447 @@
+"""EMU's operators on a small mesh against an independent numpy construction.
+
+Built here from the rest mesh alone (not from emu's C++): G (9m x 3n) with
+vec F_t = G_t x, D = diag(w_t V_t), K = G_f^T D G_f and C = G_f^T D over the
+free (unpinned) vertices, x*(F) = K^-1 (C F - G_f^T D G_p x_p). Then
+
+    E(F)  = sum_t V_t Psi(F_t) + alpha/2 |D^1/2 (G x* - F)|^2 - f . x*
+    dE/dF = V P(F) + alpha D (F - G x*) - C^T K^-1 f
+    H     = blockdiag(A_t) - alpha C^T K^-1 C
+    H_k   = blockdiag(A_t) - alpha B^T Lambda^-1 B,  B = Phi^T C (k lowest modes of K)
+
+Arrays of F are (#T, 9), row t = vec(F_t) column-major, and stacked row-major
+into one 9#T vector (tet-major), as the C++ core does.
+"""
+import numpy as np
+import pytest
+import scipy.linalg as sl
+
+import emu
+from emu import _core
+
+from conftest import gradient_operator, small_scene
+
+GRAVITY = np.array([0.0, -9.81, 0.0])
+
+
+def identity_rows(m):
+    return np.tile(np.eye(3).flatten(order="F"), (m, 1))
+
+
+def choose_scalar_modes(L, lo=6, hi=20, gap=1e-3):
+    """A scalar mode count ks in [lo, hi] with a clear spectral gap after it, so the
+    k lowest modes are well defined (not a split of a degenerate eigenspace)."""
+    w = np.linalg.eigvalsh(L)
+    for ks in range(lo, hi + 1):
+        if (w[ks] - w[ks - 1]) > gap * w[ks]:
+            return ks
+    pytest.fail("no spectral gap found for the mode test")
+
+
+class Reference:
+    """The independent numpy model of one EmuSolver."""
+
+    def __init__(self, solver):
+        md = solver.model
+        self.solver, self.core = solver, solver._core
+        self.rest = np.asarray(md.rest)
+        self.tets = np.asarray(md.tets).astype(np.int64)
+        self.m, self.n = len(self.tets), len(self.rest)
+        G, vol = gradient_operator(self.rest, self.tets)
+        self.G = G.toarray()
+        self.vol = vol
+        self.mu, self.lam = np.asarray(md.mu), np.asarray(md.lam)
+        self.fiber = np.asarray(md.fiber)
+        self.muscle = np.asarray(md.muscle)
+        self.density = np.asarray(md.density)
+        self.wv = np.asarray(md.acap_weight) * vol
+        self.Dd = np.repeat(self.wv, 9)
+        pinned = np.asarray(md.pinned)
+        assert np.array_equal(np.sort(pinned), np.sort(solver.scene.model_pins()[0]))
+        self.free = np.setdiff1d(np.arange(self.n), pinned)
+        self.pinned = pinned
+        dof = lambda v: (3 * v[:, None] + np.arange(3)).ravel()
+        self.fdof, self.pdof = dof(self.free), dof(pinned)
+        self.Gf, self.Gp = self.G[:, self.fdof], self.G[:, self.pdof]
+        self.K = self.Gf.T @ (self.Dd[:, None] * self.Gf)
+        self.C = self.Gf.T * self.Dd[None, :]
+        self.L = self.K[0::3, 0::3]
+        self.alpha = self.core.alpha
+        self.mass = np.zeros(self.n)
+        np.add.at(self.mass, self.tets.ravel(), np.repeat(0.25 * self.density * vol, 4))
+
+    def activation(self, load):
+        act = np.asarray(load.activation)
+        return np.where(self.muscle >= 0, act[np.maximum(self.muscle, 0)], 0.0)
+
+    def fit(self, load, Frows):
+        xp = np.asarray(load.pin_positions).ravel() if np.size(load.pin_positions) else self.rest[self.pinned].ravel()
+        rhs = self.C @ (Frows.ravel() - self.Gp @ xp)
+        x = self.rest.copy().ravel()
+        x[self.pdof] = xp
+        x[self.fdof] = sl.solve(self.K, rhs, assume_a="pos")
+        return x.reshape(-1, 3)
+
+    def energy(self, load, Frows):
+        act = self.activation(load)
+        x = self.fit(load, Frows)
+        Fx = (self.G @ x.ravel()).reshape(-1, 9)
+        E = 0.0
+        for t in range(self.m):
+            Ft = Frows[t].reshape(3, 3, order="F")
+            psi = _core.snh_energy(Ft, self.mu[t], self.lam[t])
+            if act[t]:
+                psi += 0.5 * act[t] * (np.sum((Ft @ self.fiber[t]) ** 2) - 1.0)
+            E += self.vol[t] * psi
+        E += 0.5 * self.alpha * np.sum(self.Dd * (Fx - Frows).ravel() ** 2)
+        E -= np.sum(self.mass[:, None] * x * np.asarray(load.gravity)[None, :])
+        return E
+
+    def gradient(self, load, Frows):
+        act = self.activation(load)
+        x = self.fit(load, Frows)
+        Fx = (self.G @ x.ravel()).reshape(-1, 9)
+        g = np.empty_like(Frows)
+        for t in range(self.m):
+            Ft = Frows[t].reshape(3, 3, order="F")
+            P = _core.snh_stress(Ft, self.mu[t], self.lam[t]) + act[t] * np.outer(Ft @ self.fiber[t], self.fiber[t])
+            g[t] = self.vol[t] * P.flatten(order="F")
+        g += self.alpha * self.wv[:, None] * (Frows - Fx)
+        f = (self.mass[self.free, None] * np.asarray(load.gravity)[None, :]).ravel()
+        g -= (self.C.T @ sl.solve(self.K, f, assume_a="pos")).reshape(-1, 9)
+        return g
+
+    def blocks(self, load, Frows, project=True):
+        act = self.activation(load)
+        A = np.empty((self.m, 9, 9))
+        for t in range(self.m):
+            Ft = Frows[t].reshape(3, 3, order="F")
+            H = _core.snh_hessian(Ft, self.mu[t], self.lam[t])
+            if project:
+                H = _core.psd_project9(H)
+            H = H + act[t] * np.kron(np.outer(self.fiber[t], self.fiber[t]), np.eye(3))
+            A[t] = self.vol[t] * H + self.alpha * self.wv[t] * np.eye(9)
+        return A
+
+    def hessian(self, A):
+        return sl.block_diag(*A) - self.alpha * self.C.T @ sl.solve(self.K, self.C, assume_a="pos")
+
+    def modes(self, k):
+        """k lowest eigenpairs of K (from the scalar L: K = L kron I3), as
+        (values, Phi) with Phi[:, c + 3 l] = psi_l kron e_c."""
+        w, psi = np.linalg.eigh(self.L)
+        ks = k // 3
+        vals = np.repeat(w[:ks], 3)
+        Phi = np.zeros((3 * len(self.free), 3 * ks))
+        for l in range(ks):
+            for c in range(3):
+                Phi[c::3, c + 3 * l] = psi[:, l]
+        return vals, Phi
+
+
+def make(alpha=100.0, modes=24, r=2, **kw):
+    s, m = small_scene(r, **kw)
+    solver = emu.Solver(s, "emu", alpha=alpha, modes=modes)
+    return solver, Reference(solver)
+
+
+@pytest.fixture(scope="module")
+def ref():
+    solver, R = make()
+    return R
+
+
+def perturbed(m, eps, seed):
+    return identity_rows(m) + eps * np.random.default_rng(seed).standard_normal((m, 9))
+
+
+LOADS = [dict(activation={"belly": 5e4}), dict(activation={"belly": 5e4}, gravity=GRAVITY),
+         dict(activation=None, gravity=GRAVITY)]
+
+
+# --------------------------------------------------------------------- geometry
+def test_reference_discretisation_is_consistent(ref):
+    """Sanity of the numpy side: G reproduces F of an affine map, K = L kron I3."""
+    rng = np.random.default_rng(0)
+    A, c = np.eye(3) + 0.2 * rng.standard_normal((3, 3)), rng.standard_normal(3)
+    x = ref.rest @ A.T + c
+    np.testing.assert_allclose((ref.G @ x.ravel()).reshape(-1, 9), np.tile(A.flatten(order="F"), (ref.m, 1)),
+                               atol=1e-12)
+    np.testing.assert_allclose(ref.K, np.kron(ref.L, np.eye(3)), atol=1e-12 * np.abs(ref.K).max())
+    assert ref.vol.min() > 0
+
+
+@pytest.mark.parametrize("case", LOADS)
+def test_fit_and_energy_match_numpy(ref, case):
+    load = ref.solver.load_case(**case)
+    F = perturbed(ref.m, 0.05, 1)
+    np.testing.assert_allclose(ref.core.fit_positions(load, F), ref.fit(load, F), rtol=0, atol=1e-11 * 10)
+    E = ref.core.energy(load, F)
+    assert E == pytest.approx(ref.energy(load, F), rel=1e-10)
+
+
+@pytest.mark.parametrize("case", LOADS)
+def test_gradient_matches_numpy(ref, case):
+    load = ref.solver.load_case(**case)
+    F = perturbed(ref.m, 0.05, 2)
+    g = ref.core.gradient(load, F)
+    assert g.shape == F.shape
+    gn = ref.gradient(load, F)
+    np.testing.assert_allclose(g, gn, rtol=0, atol=1e-10 * np.abs(gn).max())
+
+
+@pytest.mark.parametrize("case", LOADS)
+@pytest.mark.parametrize("eps", [0.0, 0.05, 0.2])
+def test_gradient_finite_differences(ref, case, eps):
+    load = ref.solver.load_case(**case)
+    m = ref.m
+    F = perturbed(m, eps, 3)
+    g = ref.core.gradient(load, F)
+    rng = np.random.default_rng(4)
+    h = 1e-6
+    for _ in range(3):
+        V = rng.standard_normal((m, 9))
+        fd = (ref.core.energy(load, F + h * V) - ref.core.energy(load, F - h * V)) / (2 * h)
+        assert np.sum(g * V) == pytest.approx(fd, rel=1e-6, abs=1e-7 * np.linalg.norm(g) * np.linalg.norm(V))
+    # single entries, including a tendon tet and a muscle tet
+    for t in (0, m // 2, m - 1):
+        for j in (0, 4, 7):
+            E1, E0 = F.copy(), F.copy()
+            E1[t, j] += h
+            E0[t, j] -= h
+            fd = (ref.core.energy(load, E1) - ref.core.energy(load, E0)) / (2 * h)
+            assert g[t, j] == pytest.approx(fd, rel=1e-5, abs=1e-6 * np.abs(g).max())
+
+
+def test_gravity_enters_gradient(ref):
+    """The load term -(dx*/dF)^T grad W = -C^T K^-1 f is present, exactly."""
+    F = perturbed(ref.m, 0.05, 5)
+    g0 = ref.core.gradient(ref.solver.load_case({"belly": 5e4}), F)
+    g1 = ref.core.gradient(ref.solver.load_case({"belly": 5e4}, gravity=GRAVITY), F)
+    f = (ref.mass[ref.free, None] * GRAVITY[None, :]).ravel()
+    term = -(ref.C.T @ sl.solve(ref.K, f, assume_a="pos")).reshape(-1, 9)
+    assert np.abs(term).max() > 0
+    np.testing.assert_allclose(g1 - g0, term, rtol=0, atol=1e-6 * np.abs(term).max())
+    # at rest without activation the gradient is the load term alone, and not zero
+    load = ref.solver.load_case(gravity=GRAVITY)
+    g = ref.core.gradient(load, identity_rows(ref.m))
+    np.testing.assert_allclose(g, term, rtol=0, atol=1e-9 * np.abs(term).max())
+    # gravity in the energy at rest: E(I) = -f . x(I) = -sum m_v g . X_v
+    gz = np.array([0.0, 0.0, -9.81])  # along the muscle, so the work is not ~0 by symmetry
+    E = ref.core.energy(ref.solver.load_case(gravity=gz), identity_rows(ref.m))
+    W = np.sum(ref.mass * (ref.rest @ gz))
+    assert abs(W) > 0
+    assert E == pytest.approx(-W, rel=1e-10)
+
+
+# ---------------------------------------------------------------------- Hessian
+@pytest.mark.parametrize("eps", [0.0, 0.1, 0.3])
+def test_block_hessians_match_numpy(ref, eps):
+    load = ref.solver.load_case({"belly": 5e4})
+    F = perturbed(ref.m, eps, 6)
+    A = ref.core.block_hessians(load, F)
+    assert A.shape == (ref.m, 81)
+    A = A.reshape(-1, 9, 9).transpose(0, 2, 1)  # column-major 9x9 per row
+    An = ref.blocks(load, F)
+    np.testing.assert_allclose(A, An, rtol=0, atol=1e-10 * np.abs(An).max())
+    for t in range(ref.m):
+        np.testing.assert_allclose(A[t], A[t].T, rtol=0, atol=1e-10 * np.abs(An).max())
+        assert np.linalg.eigvalsh(A[t]).min() > 0
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.1, 0.3])
+def test_hessian_product_matches_numpy_schur_complement(ref, eps):
+    load = ref.solver.load_case({"belly": 5e4})
+    F = perturbed(ref.m, eps, 7)
+    H = ref.hessian(ref.blocks(load, F))
+    V = np.random.default_rng(8).standard_normal((ref.m, 9))
+    Hv = ref.core.hessian_product(load, F, V)
+    expected = (H @ V.ravel()).reshape(-1, 9)
+    np.testing.assert_allclose(Hv, expected, rtol=0, atol=1e-10 * np.abs(expected).max())
+    # the exact Hessian is PSD (projected blocks): the Schur complement of a PSD energy
+    assert np.linalg.eigvalsh(0.5 * (H + H.T)).min() >= -1e-9 * np.abs(H).max()
+
+
+def fd_hessian_product(core, load, F, V, h=1e-6):
+    return (core.gradient(load, F + h * V) - core.gradient(load, F - h * V)) / (2 * h)
+
+
+@pytest.mark.parametrize("eps", [0.0, 1e-4])
+@pytest.mark.parametrize("case", LOADS[:2])
+def test_hessian_product_finite_differences_where_blocks_definite(ref, eps, case):
+    """At F = I the SNH Hessian is only semi-definite (zero curvature along
+    infinitesimal rotations, and any perturbation can make it indefinite); a
+    uniform 0.2% expansion makes every block definite, so the projected Hessian
+    is the exact one and FD of the gradient must reproduce it."""
+    load = ref.solver.load_case(**case)
+    F = 1.002 * identity_rows(ref.m) + eps * np.random.default_rng(9).standard_normal((ref.m, 9))
+    for t in range(ref.m):
+        Ft = F[t].reshape(3, 3, order="F")
+        Hs = _core.snh_hessian(Ft, ref.mu[t], ref.lam[t])
+        assert np.linalg.eigvalsh(Hs).min() > 0
+        assert np.array_equal(_core.psd_project9(Hs), Hs)
+    rng = np.random.default_rng(10)
+    for _ in range(2):
+        V = rng.standard_normal((ref.m, 9))
+        Hv = ref.core.hessian_product(load, F, V)
+        fd = fd_hessian_product(ref.core, load, F, V)
+        np.testing.assert_allclose(Hv, fd, rtol=0, atol=1e-6 * np.abs(Hv).max())
+
+
+def test_unprojected_hessian_finite_differences(ref):
+    """At a strongly deformed F, where some SNH blocks are indefinite, FD of the
+    gradient equals the unprojected Schur complement (and differs from the projected one)."""
+    load = ref.solver.load_case({"belly": 5e4})
+    F = perturbed(ref.m, 0.3, 11)
+    indefinite = [t for t in range(ref.m)
+                  if np.linalg.eigvalsh(_core.snh_hessian(F[t].reshape(3, 3, order="F"), ref.mu[t],
+                                                          ref.lam[t])).min() < 0]
+    assert indefinite, "the test needs some indefinite blocks"
+    H_exact = ref.hessian(ref.blocks(load, F, project=False))
+    V = np.random.default_rng(12).standard_normal((ref.m, 9))
+    fd = fd_hessian_product(ref.core, load, F, V).ravel()
+    Hv = H_exact @ V.ravel()
+    np.testing.assert_allclose(fd, Hv, rtol=0, atol=1e-6 * np.abs(Hv).max())
+    Hp = ref.core.hessian_product(load, F, V).ravel()
+    assert np.abs(Hp - Hv).max() > 1e-4 * np.abs(Hv).max()
+
+
+def test_hessian_product_ignores_gravity_and_is_linear(ref):
+    F = perturbed(ref.m, 0.1, 13)
+    rng = np.random.default_rng(14)
+    V, W = rng.standard_normal((2, ref.m, 9))
+    l0 = ref.solver.load_case({"belly": 5e4})
+    l1 = ref.solver.load_case({"belly": 5e4}, gravity=GRAVITY)
+    a = ref.core.hessian_product(l0, F, V)
+    np.testing.assert_allclose(ref.core.hessian_product(l1, F, V), a, rtol=0, atol=1e-12 * np.abs(a).max())
+    b = ref.core.hessian_product(l0, F, W)
+    np.testing.assert_allclose(ref.core.hessian_product(l0, F, 2 * V - 3 * W), 2 * a - 3 * b, rtol=0,
+                               atol=1e-10 * np.abs(a).max())
+
+
+# ------------------------------------------------------------------------ modes
+@pytest.fixture(scope="module")
+def mode_setup():
+    s, _ = small_scene(2)
+    base = emu.Solver(s, "emu", alpha=100.0, modes=3)
+    R0 = Reference(base)
+    ks = choose_scalar_modes(R0.L)
+    solver = emu.Solver(s, "emu", alpha=100.0, modes=3 * ks)
+    return solver, Reference(solver), ks
+
+
+def test_mode_values_are_lowest_eigenvalues_of_K(mode_setup):
+    solver, R, ks = mode_setup
+    core = solver._core
+    assert core.modes == 3 * ks
+    lam = np.asarray(core.mode_values())
+    assert lam.shape == (3 * ks,)
+    wK = np.linalg.eigvalsh(R.K)[: 3 * ks]
+    np.testing.assert_allclose(np.sort(lam), wK, rtol=1e-9, atol=0)
+    # each eigenvalue of L appears three times (K = L kron I3)
+    wL = np.linalg.eigvalsh(R.L)[:ks]
+    np.testing.assert_allclose(np.sort(lam), np.repeat(wL, 3), rtol=1e-9)
+
+
+def test_mode_matrix_is_phi_transpose_C(mode_setup):
+    solver, R, ks = mode_setup
+    core = solver._core
+    k = 3 * ks
+    B = np.asarray(core.mode_matrix())
+    lam = np.asarray(core.mode_values())
+    assert B.shape == (k, 9 * R.m)
+    vals, Phi = R.modes(k)
+    Bn = Phi.T @ R.C
+    # sign-invariant: B^T Lambda^-1 B
+    S = B.T @ (B / lam[:, None])
+    Sn = Bn.T @ (Bn / vals[:, None])
+    np.testing.assert_allclose(S, Sn, rtol=0, atol=1e-8 * np.abs(Sn).max())
+    # row by row up to sign (the chosen k has simple scalar eigenvalues below the gap)
+    wL = np.linalg.eigvalsh(R.L)[: ks + 1]
+    if np.all(np.diff(wL) > 1e-6 * wL[1:]):
+        order = np.argsort(lam, kind="stable")
+        for row in range(k):
+            b = B[row]
+            j = np.argmax([abs(b @ bn) / (np.linalg.norm(b) * np.linalg.norm(bn)) for bn in Bn])
+            assert abs(lam[row] - vals[j]) <= 1e-9 * vals[j]
+            sign = np.sign(b @ Bn[j])
+            np.testing.assert_allclose(b, sign * Bn[j], rtol=0, atol=1e-8 * np.abs(Bn[j]).max())
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.2])
+@pytest.mark.parametrize("alpha", [1.0, 100.0])
+def test_woodbury_solve_equals_dense_solve(eps, alpha):
+    solver, R = make(alpha=alpha, modes=24)
+    core = solver._core
+    load = solver.load_case({"belly": 5e4})
+    F = perturbed(R.m, eps, 15)
+    A = ref_blocks = R.blocks(load, F)
+    B = np.asarray(core.mode_matrix())
+    lam = np.asarray(core.mode_values())
+    Hk = sl.block_diag(*A) - R.alpha * B.T @ (B / lam[:, None])
+    # H_k over-estimates the exact Hessian, which is PSD
+    assert np.linalg.eigvalsh(Hk).min() > 0
+    Rhs = np.random.default_rng(16).standard_normal((R.m, 9))
+    x = core.woodbury_solve(load, F, Rhs)
+    xn = sl.solve(Hk, Rhs.ravel(), assume_a="pos").reshape(-1, 9)
+    np.testing.assert_allclose(x, xn, rtol=0, atol=1e-8 * np.abs(xn).max())
+    # and it is not simply A^-1 r (the low-rank term matters)
+    xa = np.stack([np.linalg.solve(ref_blocks[t], Rhs[t]) for t in range(R.m)])
+    assert np.abs(xa - xn).max() > 1e-3 * np.abs(xn).max()
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.2])
+def test_woodbury_with_all_modes_is_exact_newton(eps):
+    s, _ = small_scene(2)
+    nfree = len(s.points) - len(s.model_pins()[0])
+    solver = emu.Solver(s, "emu", alpha=100.0, modes=3 * nfree)
+    core = solver._core
+    assert core.modes == 3 * nfree
+    R = Reference(solver)
+    load = solver.load_case({"belly": 5e4})
+    F = perturbed(R.m, eps, 17)
+    H = R.hessian(R.blocks(load, F))
+    Rhs = np.random.default_rng(18).standard_normal((R.m, 9))
+    x = core.woodbury_solve(load, F, Rhs)
+    xn = np.linalg.solve(H, Rhs.ravel()).reshape(-1, 9)
+    np.testing.assert_allclose(x, xn, rtol=0, atol=1e-7 * np.abs(xn).max())
+    # and consistent with the Hessian product: H (H^-1 r) = r
+    np.testing.assert_allclose(core.hessian_product(load, F, x), Rhs, rtol=0, atol=1e-7 * np.abs(Rhs).max())
+
+
+def test_modes_by_lanczos_on_a_larger_mesh():
+    """More than 400 free vertices: the modes come from shift-invert Lanczos, not a
+    dense eigensolver. Check values and the sign-invariant B^T Lambda^-1 B v."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spl
+
+    s, _ = small_scene(5)
+    nfree = len(s.points) - len(s.model_pins()[0])
+    assert nfree > 400
+    solver = emu.Solver(s, "emu", alpha=100.0, modes=3)
+    md = solver.model
+    G, vol = gradient_operator(np.asarray(md.rest), np.asarray(md.tets).astype(np.int64))
+    free = np.setdiff1d(np.arange(len(md.rest)), np.asarray(md.pinned))
+    Dd = np.repeat(np.asarray(md.acap_weight) * vol, 9)
+    Gs = G[:, 3 * free]  # x-coordinate columns: the scalar problem
+    L = (Gs.T @ sp.diags(Dd) @ Gs).toarray()
+    # G's x-columns give vec(F) rows 0, 3, 6 (F[0, k]); L_ab = sum w V b_a . b_b
+    ks = choose_scalar_modes(L, lo=8, hi=30)
+    solver = emu.Solver(s, "emu", alpha=100.0, modes=3 * ks)
+    core = solver._core
+    lam = np.asarray(core.mode_values())
+    w, psi = np.linalg.eigh(L)
+    np.testing.assert_allclose(np.sort(lam), np.repeat(w[:ks], 3), rtol=1e-7)
+    B = np.asarray(core.mode_matrix())
+    fdof = (3 * free[:, None] + np.arange(3)).ravel()
+    C = (G[:, fdof].T @ sp.diags(Dd)).tocsr()
+    rng = np.random.default_rng(19)
+    v = rng.standard_normal(B.shape[1])
+    got = B.T @ ((B @ v) / lam)
+    Phi = np.zeros((len(fdof), 3 * ks))
+    for l in range(ks):
+        for c in range(3):
+            Phi[c::3, c + 3 * l] = psi[:, l]
+    Bn = (C.T @ Phi).T
+    want = Bn.T @ ((Bn @ v) / np.repeat(w[:ks], 3))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 * np.abs(want).max())
