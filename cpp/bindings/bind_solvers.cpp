@@ -10,6 +10,26 @@ namespace py = pybind11;
 
 namespace emu::bindings {
 namespace {
+// Ctrl-C: the solvers poll this once per iteration without holding the GIL.
+SolverOptions with_interrupt(SolverOptions o) {
+  o.interrupted = [] {
+    py::gil_scoped_acquire gil;
+    return PyErr_CheckSignals() != 0;
+  };
+  return o;
+}
+
+// Run a solve without the GIL; re-raise the KeyboardInterrupt it stopped for.
+template <class F>
+SolveResult run_solve(F&& f) {
+  SolveResult r;
+  {
+    py::gil_scoped_release release;
+    r = f();
+  }
+  if (r.status == "interrupted" && PyErr_Occurred()) throw py::error_already_set();
+  return r;
+}
 Eigen::MatrixXd history_array(const SolveResult& r) {
   Eigen::MatrixXd h(r.history.size(), 7);
   for (size_t i = 0; i < r.history.size(); ++i) {
@@ -69,6 +89,8 @@ void bind_solvers(py::module_& m) {
       .def_readonly("status", &SolveResult::status)
       .def_readonly("iterations", &SolveResult::iterations)
       .def_readonly("cg_iterations", &SolveResult::cg_iterations)
+      .def_readonly("filtered_steps", &SolveResult::filtered_steps)
+      .def_readonly("exact_attempts_failed", &SolveResult::exact_attempts_failed)
       .def_readonly("energy", &SolveResult::energy)
       .def_readonly("grad_norm", &SolveResult::grad_norm)
       .def_readonly("grad_norm0", &SolveResult::grad_norm0)
@@ -79,25 +101,40 @@ void bind_solvers(py::module_& m) {
 
   using gil = py::call_guard<py::gil_scoped_release>;
   py::class_<FemSolver>(m, "FemSolver")
-      .def(py::init<const Model&, const SolverOptions&>(), py::arg("model"), py::arg("options"), gil())
+      .def(py::init([](const Model& m, const SolverOptions& o) {
+             py::gil_scoped_release release;
+             return std::make_unique<FemSolver>(m, with_interrupt(o));
+           }),
+           py::arg("model"), py::arg("options"))
       .def(
-          "solve", [](FemSolver& s, const LoadCase& l) { return s.solve(l); }, py::arg("load"), gil())
+          "solve", [](FemSolver& s, const LoadCase& l) { return run_solve([&] { return s.solve(l); }); },
+          py::arg("load"))
       .def(
-          "solve_from", [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0) { return s.solve(l, &x0); },
-          py::arg("load"), py::arg("x0"), gil())
+          "solve_from",
+          [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0) {
+            return run_solve([&] { return s.solve(l, &x0); });
+          },
+          py::arg("load"), py::arg("x0"))
       .def("energy", &FemSolver::energy, py::arg("load"), py::arg("x"), gil())
       .def("gradient", &FemSolver::gradient, py::arg("load"), py::arg("x"), gil())
       .def_property_readonly("setup_seconds", &FemSolver::setup_seconds)
       .def_property_readonly("factor_nnz", &FemSolver::factor_nnz);
 
   py::class_<EmuSolver>(m, "EmuSolver")
-      .def(py::init<const Model&, const SolverOptions&, const EmuOptions&>(), py::arg("model"), py::arg("options"),
-           py::arg("emu_options"), gil())
+      .def(py::init([](const Model& m, const SolverOptions& o, const EmuOptions& e) {
+             py::gil_scoped_release release;
+             return std::make_unique<EmuSolver>(m, with_interrupt(o), e);
+           }),
+           py::arg("model"), py::arg("options"), py::arg("emu_options"))
       .def(
-          "solve", [](EmuSolver& s, const LoadCase& l) { return s.solve(l); }, py::arg("load"), gil())
+          "solve", [](EmuSolver& s, const LoadCase& l) { return run_solve([&] { return s.solve(l); }); },
+          py::arg("load"))
       .def(
-          "solve_from", [](EmuSolver& s, const LoadCase& l, const Eigen::MatrixXd& F0) { return s.solve(l, &F0); },
-          py::arg("load"), py::arg("F0"), gil())
+          "solve_from",
+          [](EmuSolver& s, const LoadCase& l, const Eigen::MatrixXd& F0) {
+            return run_solve([&] { return s.solve(l, &F0); });
+          },
+          py::arg("load"), py::arg("F0"))
       .def("energy", &EmuSolver::energy, py::arg("load"), py::arg("F"), gil())
       .def("gradient", &EmuSolver::gradient, py::arg("load"), py::arg("F"), gil())
       .def("fit_positions", &EmuSolver::fit_positions, py::arg("load"), py::arg("F"), gil())

@@ -41,6 +41,8 @@ class Solution:
     history: dict = field(repr=False)
     F: np.ndarray | None = field(default=None, repr=False)
     settings: dict = field(default_factory=dict)
+    filtered_steps: int = 0          # iterations that fell back to the PSD-filtered Hessian
+    exact_attempts_failed: int = 0   # FEM: factorisations that found the exact Hessian indefinite
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
@@ -183,7 +185,8 @@ class Solver:
                         status=r.status, iterations=r.iterations, cg_iterations=r.cg_iterations,
                         time_s=r.time_s, setup_time_s=self.setup_time_s, energy=r.energy,
                         grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
-                        history=history, F=F, settings=dict(self.settings))
+                        history=history, F=F, settings=dict(self.settings), filtered_steps=r.filtered_steps,
+                        exact_attempts_failed=r.exact_attempts_failed)
 
     def _initial_array(self, initial):
         if isinstance(initial, Solution):

@@ -251,6 +251,10 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   // iterations, or sooner when CG slows down by half since the last rebuild.
   int since_refresh = 0, cg_after_refresh = -1, last_cg = 0;
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
+    if (options_.interrupted && options_.interrupted()) {
+      res.status = "interrupted";
+      break;
+    }
     const bool refresh = !exact || it == 1 || since_refresh >= emu_.preconditioner_refresh ||
                          (cg_after_refresh >= 0 && last_cg > 1.5 * cg_after_refresh + 5);
     if (refresh) {
@@ -277,8 +281,9 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       for (int i = 0; i < emu_.cg_max_iterations; ++i) {
         hessian_product_into(exact ? A_exact : A, p, Hp);
         const double pHp = dot(p, Hp);
-        if (!(pHp > 0)) {  // no curvature along p: keep what we have
+        if (!(pHp > 0)) {  // negative curvature (exact H is indefinite here): keep what we have
           if (i == 0) d = z;
+          ++res.filtered_steps;
           break;
         }
         const double a = rz / pHp;

@@ -122,20 +122,31 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
     res.status = "converged: initial state is in equilibrium";
   }
   Eigen::VectorXd d(nf * 3);
-  int exact_steps = 0;
+  bool last_exact_ok = true;
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
-    if (options_.exact_when_definite) {
-      // Newton with the true Hessian where it is definite (near a stable equilibrium).
+    if (options_.interrupted && options_.interrupted()) {
+      res.status = "interrupted";
+      break;
+    }
+    // Newton with the true Hessian where it is definite (near a stable
+    // equilibrium). A failed attempt costs a factorisation, so after one it is
+    // retried only once the iteration is in the Newton regime (last step full).
+    const bool try_exact = options_.exact_when_definite &&
+                           (last_exact_ok || res.history.back().step == 1.0);
+    if (try_exact) {
       assemble_hessian(x, act, true);
       if (factor_.factorize(values_.data())) {
         factor_.solve(g.data(), d.data(), 1);
         d = -d;
         if (g.dot(d) < 0) {
-          ++exact_steps;
+          last_exact_ok = true;
           goto have_direction;
         }
       }
+      ++res.exact_attempts_failed;
+      last_exact_ok = false;
     }
+    ++res.filtered_steps;
     {
     assemble_hessian(x, act, false);
     bool ok = factor_.factorize(values_.data());

@@ -2,6 +2,7 @@
 // Options, per-iteration records and results shared by the FEM and EMU solvers.
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,9 @@ struct SolverOptions {
   // Cholesky succeeds; EMU: CG sees no negative curvature); fall back to the
   // filtered one. Restores Newton's quadratic end game.
   bool exact_when_definite = true;
+  // Polled once per iteration; returning true stops the solve with status
+  // "interrupted" (the Python bindings use it for Ctrl-C).
+  std::function<bool()> interrupted;
 };
 
 enum class EmuStep { Woodbury, NewtonKrylov };
@@ -47,6 +51,8 @@ struct SolveResult {
   bool converged = false;
   std::string status;
   int iterations = 0, cg_iterations = 0;
+  int filtered_steps = 0;  // iterations that needed the PSD-filtered Hessian (not the exact one)
+  int exact_attempts_failed = 0;  // FEM: factorisations of the exact Hessian that found it indefinite
   double energy = 0, grad_norm = 0, grad_norm0 = 0, rel_energy_change = 0;
   double time_s = 0;  // solve time (setup excluded)
   std::vector<IterationRecord> history;  // entry 0 is the initial state
