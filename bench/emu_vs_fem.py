@@ -50,7 +50,9 @@ def main(argv=None):
     ap.add_argument("--modes", type=int, default=48)
     ap.add_argument("--woodbury-max-iterations", type=int, default=3000,
                     help="cap for the paper's quasi-Newton step (it may need thousands)")
-    ap.add_argument("--skip-woodbury", action="store_true", help="run only FEM and EMU Newton-Krylov")
+    ap.add_argument("--skip-woodbury", action="store_true", help="do not run the paper's quasi-Newton step")
+    ap.add_argument("--schur", action="store_true",
+                    help="also run Newton-Krylov with the Schur-complement preconditioner")
     ap.add_argument("--json", type=str, default=None, help="write the results here")
     a = ap.parse_args(argv)
     if a.threads:
@@ -69,6 +71,8 @@ def main(argv=None):
     fem, fem_wall = run("fem", scene, act)
     rows = [("fem", fem, fem_wall)]
     variants = [("emu_newton_krylov", dict(step="newton-krylov"))]
+    if a.schur:
+        variants.append(("emu_newton_krylov_schur", dict(step="newton-krylov", preconditioner="schur")))
     if not a.skip_woodbury:
         variants.append(("emu_woodbury", dict(step="woodbury", max_iterations=a.woodbury_max_iterations)))
     for key, kw in variants:

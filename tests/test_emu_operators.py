@@ -359,7 +359,6 @@ def test_mode_matrix_is_phi_transpose_C(mode_setup):
     # row by row up to sign (the chosen k has simple scalar eigenvalues below the gap)
     wL = np.linalg.eigvalsh(R.L)[: ks + 1]
     if np.all(np.diff(wL) > 1e-6 * wL[1:]):
-        order = np.argsort(lam, kind="stable")
         for row in range(k):
             b = B[row]
             j = np.argmax([abs(b @ bn) / (np.linalg.norm(b) * np.linalg.norm(bn)) for bn in Bn])
@@ -375,7 +374,7 @@ def test_woodbury_solve_equals_dense_solve(eps, alpha):
     core = solver._core
     load = solver.load_case({"belly": 5e4})
     F = perturbed(R.m, eps, 15)
-    A = ref_blocks = R.blocks(load, F)
+    A = R.blocks(load, F)
     B = np.asarray(core.mode_matrix())
     lam = np.asarray(core.mode_values())
     Hk = sl.block_diag(*A) - R.alpha * B.T @ (B / lam[:, None])
@@ -386,7 +385,7 @@ def test_woodbury_solve_equals_dense_solve(eps, alpha):
     xn = sl.solve(Hk, Rhs.ravel(), assume_a="pos").reshape(-1, 9)
     np.testing.assert_allclose(x, xn, rtol=0, atol=1e-8 * np.abs(xn).max())
     # and it is not simply A^-1 r (the low-rank term matters)
-    xa = np.stack([np.linalg.solve(ref_blocks[t], Rhs[t]) for t in range(R.m)])
+    xa = np.stack([np.linalg.solve(A[t], Rhs[t]) for t in range(R.m)])
     assert np.abs(xa - xn).max() > 1e-3 * np.abs(xn).max()
 
 
@@ -398,6 +397,10 @@ def test_woodbury_with_all_modes_is_exact_newton(eps):
     core = solver._core
     assert core.modes == 3 * nfree
     R = Reference(solver)
+    # all modes: B^T Lambda^-1 B is C^T K^-1 C
+    B, lam = np.asarray(core.mode_matrix()), np.asarray(core.mode_values())
+    S = R.C.T @ sl.solve(R.K, R.C, assume_a="pos")
+    np.testing.assert_allclose(B.T @ (B / lam[:, None]), S, rtol=0, atol=1e-8 * np.abs(S).max())
     load = solver.load_case({"belly": 5e4})
     F = perturbed(R.m, eps, 17)
     H = R.hessian(R.blocks(load, F))

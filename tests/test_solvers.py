@@ -16,8 +16,9 @@ from conftest import gradient_operator, quiet_scene, small_scene
 # ------------------------------------------------------------------ rest state
 @pytest.mark.parametrize("method,options", [("fem", {}), ("emu", {}), ("emu", {"step": "woodbury"})])
 @pytest.mark.parametrize("activation", [{}, None, {"belly": 0.0}])
-def test_rest_state_without_load(method, options, activation):
-    s, m = small_scene(2)
+@pytest.mark.parametrize("tendons", [True, False], ids=["with_tendons", "muscle_only"])
+def test_rest_state_without_load(method, options, activation, tendons):
+    s, m = small_scene(2, tendon_fraction=0.12 if tendons else 0.0)
     sol = emu.solve(s, activation, method, **options)
     assert sol.converged, sol.status
     assert sol.iterations == 0
@@ -48,8 +49,7 @@ def snh_numpy(F, mu, lam, hessian=False):
     g = cof.transpose(0, 2, 1).reshape(m, 9)
     H = (mu * (1 - 1 / (ic + 1)))[:, None, None] * np.eye(9)
     H = H + (2 * mu / (ic + 1) ** 2)[:, None, None] * np.einsum("ti,tj->tij", f, f)
-    H = H + lam[:, None, None] * np.einsum("ti,tj->tij", g, g) if np.ndim(lam) else \
-        H + lam * np.einsum("ti,tj->tij", g, g)
+    H = H + lam * np.einsum("ti,tj->tij", g, g)
     # d2J: block (a, b) (columns a, b of F) = sum_c eps_abc [f_c]_x
     s = lam * (J - beta)
 
@@ -99,8 +99,8 @@ class NumpyFEM:
         mass = np.zeros(n)
         np.add.at(mass, tets.ravel(), np.repeat(0.25 * density * vol, 4))
         self.force = (mass[:, None] * np.asarray(gravity, float)[None, :]).ravel()
-        self.UU = np.kron(np.einsum("ti,tj->tij", fibers, fibers), np.eye(3)) if False else \
-            np.einsum("tij,kl->tikjl", np.einsum("ti,tj->tij", fibers, fibers), np.eye(3)).reshape(-1, 9, 9)
+        # fibre Hessian a (u u^T kron I3) per tet, in the column-major vec(F) layout
+        self.UU = np.einsum("tij,kl->tikjl", np.einsum("ti,tj->tij", fibers, fibers), np.eye(3)).reshape(-1, 9, 9)
 
     def _F(self, x):
         return (self.G @ x).reshape(-1, 3, 3).transpose(0, 2, 1)
@@ -172,30 +172,30 @@ def test_fem_matches_independent_newton(activation, gravity, pin):
     s.add_muscle("belly", np.arange(len(m.tets)), m.fibers, youngs=6e4, poisson=0.49, density=1060.0)
     pins = m.proximal if pin == "proximal" else np.concatenate([m.proximal, m.distal])
     s.pin(pins)
-    sol = emu.solve(s, {"belly": activation}, "fem", gravity=list(gravity), rtol_grad=1e-8, rtol_energy=1e-14)
+    sol = emu.solve(s, {"belly": activation}, "fem", gravity=list(gravity), rtol_grad=1e-7)
     assert sol.converged, sol.status
     ref = NumpyFEM(m.points, m.tets, m.fibers, 6e4, 0.49, activation, pins, gravity=gravity)
     x, its = ref.solve(m.points)
     moved = np.abs(x - m.points).max() / np.linalg.norm(np.ptp(m.points, axis=0))
     assert moved > 1e-3, "the load case must deform the mesh for the test to mean anything"
     assert emu.vertex_error(sol.positions, x, m.points) < 1e-6
-    # the FEM energy function agrees with the reference too (same rest offset convention)
-    core = emu.Solver(s, "fem")._core
-    load = emu.Solver(s, "fem").load_case({"belly": activation}, gravity=list(gravity))
-    e_ref = ref.energy(x.ravel())
-    assert core.energy(load, x) == pytest.approx(e_ref - np.sum(ref.vol) * 0.5 * activation, rel=1e-9) \
-        or core.energy(load, x) == pytest.approx(e_ref, rel=1e-9)
+    # the FEM energy function agrees with the reference up to a constant (rest offsets)
+    solver = emu.Solver(s, "fem")
+    load = solver.load_case({"belly": activation}, gravity=list(gravity))
+    dE = solver._core.energy(load, x) - solver._core.energy(load, m.points)
+    assert dE == pytest.approx(ref.energy(x.ravel()) - ref.energy(m.points.ravel()), rel=1e-9)
+    assert abs(dE) > 0
 
 
 # --------------------------------------------------------- EMU converges to FEM
 def test_emu_approaches_fem_as_alpha_grows():
     s, m = small_scene(2)
     act = {"belly": 5e4}
-    fem = emu.solve(s, act, "fem", rtol_grad=1e-8)
+    fem = emu.solve(s, act, "fem", rtol_grad=1e-7)
     assert fem.converged
     errors = []
     for alpha in [1.0, 10.0, 100.0, 1e3, 1e4]:
-        sol = emu.solve(s, act, "emu", alpha=alpha, rtol_grad=1e-8)
+        sol = emu.solve(s, act, "emu", alpha=alpha)
         assert sol.converged, (alpha, sol.status)
         errors.append(emu.vertex_error(sol, fem))
     assert all(b < a for a, b in zip(errors, errors[1:])), errors

@@ -73,6 +73,10 @@ void bind_solvers(py::module_& m) {
 
   py::enum_<EmuStep>(m, "EmuStep").value("woodbury", EmuStep::Woodbury).value("newton_krylov", EmuStep::NewtonKrylov);
 
+  py::enum_<EmuPreconditioner>(m, "EmuPreconditioner")
+      .value("woodbury", EmuPreconditioner::Woodbury)
+      .value("schur", EmuPreconditioner::Schur);
+
   py::class_<EmuOptions>(m, "EmuOptions")
       .def(py::init<>())
       .def_readwrite("alpha", &EmuOptions::alpha)
@@ -80,7 +84,8 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("step", &EmuOptions::step)
       .def_readwrite("cg_max_iterations", &EmuOptions::cg_max_iterations)
       .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max)
-      .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh);
+      .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh)
+      .def_readwrite("preconditioner", &EmuOptions::preconditioner);
 
   py::class_<SolveResult>(m, "SolveResult")
       .def_readonly("positions", &SolveResult::positions)

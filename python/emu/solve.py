@@ -54,7 +54,10 @@ class Solution:
     @property
     def label(self) -> str:
         if self.method == "emu":
-            return f"emu_{self.settings.get('step', 'newton-krylov').replace('-', '_')}"
+            label = f"emu_{self.settings.get('step', 'newton-krylov').replace('-', '_')}"
+            if self.settings.get("preconditioner") == "schur":
+                label += "_schur"
+            return label
         return self.method
 
 
@@ -70,14 +73,18 @@ class Solver:
     rtol_grad     stop when |g| <= rtol_grad |g_0| ...
     rtol_energy   ... and the last energy decrease <= rtol_energy x total decrease
     max_iterations  per solve
-    preconditioner_refresh  Newton-Krylov: rebuild the Woodbury preconditioner every n steps
+    preconditioner  Newton-Krylov's preconditioner: "woodbury" (the paper's approximation through
+                  k modes, no factorisation after setup) or "schur" (exact inverse of the filtered
+                  Hessian through the position-space Schur complement: one factorisation per rebuild)
+    preconditioner_refresh  Newton-Krylov: rebuild the preconditioner every n steps (sooner if CG slows)
     exact_when_definite  use the unfiltered Hessian when it is definite (see README)
     threads       OpenMP and OpenBLAS threads (None: leave as is)
     """
 
     def __init__(self, scene: Scene, method: str = "emu", *, alpha: float = 100.0, modes: int = 48,
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
-                 max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner_refresh: int = 3,
+                 max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "woodbury",
+                 preconditioner_refresh: int = 3,
                  exact_when_definite: bool = True, threads: int | None = None):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -115,8 +122,12 @@ class Solver:
             if int(preconditioner_refresh) < 1:
                 raise ValueError(f"preconditioner_refresh must be >= 1, got {preconditioner_refresh}")
             eo.preconditioner_refresh = int(preconditioner_refresh)
+            if preconditioner not in ("woodbury", "schur"):
+                raise ValueError(f"preconditioner must be 'woodbury' or 'schur', got {preconditioner!r}")
+            eo.preconditioner = getattr(_core.EmuPreconditioner, preconditioner)
             self._core = _core.EmuSolver(self.model, opts, eo)
-            self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step)
+            self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
+                                 preconditioner=preconditioner if step == "newton-krylov" else None)
         self.setup_time_s = self._core.setup_seconds
 
     def activation_vector(self, activation=None, normalized: bool = False) -> np.ndarray:

@@ -30,10 +30,18 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   acap_ = std::make_unique<AcapOperator>(model_, disc_);
   factor_seconds_ = seconds_since(t0);
   t0 = Clock::now();
-  const int ks = std::min((emu_.modes + 2) / 3, disc_.num_free);
+  // Modes only where the Woodbury approximation is used (section 7: leave out
+  // what the solve does not need).
+  const bool schur = emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur;
+  const int ks = schur ? 0 : std::min((emu_.modes + 2) / 3, disc_.num_free);
   const Modes modes = lowest_modes(acap_->factor(), ks);
   modes_seconds_ = seconds_since(t0);
   woodbury_ = std::make_unique<Woodbury>(model_, disc_, *acap_, modes, emu_.alpha);
+  if (schur) {
+    t0 = Clock::now();
+    schur_ = std::make_unique<SchurPreconditioner>(model_, disc_, *acap_, emu_.alpha);
+    factor_seconds_ += seconds_since(t0);
+  }
   tet_energy_.resize(model_.tets.rows());
 }
 
@@ -250,6 +258,10 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   // rebuilt (eigen-filtered blocks, SYRK) every preconditioner_refresh
   // iterations, or sooner when CG slows down by half since the last rebuild.
   int since_refresh = 0, cg_after_refresh = -1, last_cg = 0;
+  auto precondition = [&](const Mat9X& in, Mat9X& out) {
+    if (schur_) schur_->apply(in, out);
+    else woodbury_->apply(in, out);
+  };
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
     if (options_.interrupted && options_.interrupted()) {
       res.status = "interrupted";
@@ -259,7 +271,14 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
                          (cg_after_refresh >= 0 && last_cg > 1.5 * cg_after_refresh + 5);
     if (refresh) {
       blocks_into(c, F, &A, exact ? &A_exact : nullptr);
-      woodbury_->update(A);
+      if (schur_) {
+        if (!schur_->update(A)) {
+          res.status = "Schur-complement preconditioner could not be factorised";
+          break;
+        }
+      } else {
+        woodbury_->update(A);
+      }
       since_refresh = 0;
       cg_after_refresh = -1;
     } else {
@@ -275,7 +294,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       const double eta = std::min(emu_.cg_forcing_max, std::sqrt(gn / conv.g0));
       d.setZero(9, m);
       r = -g;
-      woodbury_->apply(r, z);
+      precondition(r, z);
       p = z;
       double rz = dot(r, z);
       for (int i = 0; i < emu_.cg_max_iterations; ++i) {
@@ -291,7 +310,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
         r -= a * Hp;
         ++cg_its;
         if (r.norm() <= eta * gn) break;
-        woodbury_->apply(r, z);
+        precondition(r, z);
         const double rz_new = dot(r, z);
         p = z + (rz_new / rz) * p;
         rz = rz_new;
@@ -299,7 +318,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     }
     double slope = dot(g, d);
     if (!(slope < 0)) {
-      woodbury_->apply(g, d);
+      precondition(g, d);
       d = -d;
       slope = dot(g, d);
       if (!(slope < 0)) {

@@ -17,6 +17,7 @@
 #include "emu/model/model.h"
 #include "emu/solvers/acap.h"
 #include "emu/solvers/solve_types.h"
+#include "emu/solvers/schur_preconditioner.h"
 #include "emu/solvers/woodbury.h"
 
 namespace emu {
@@ -68,6 +69,7 @@ class EmuSolver {
   EmuOptions emu_;
   std::unique_ptr<AcapOperator> acap_;
   std::unique_ptr<Woodbury> woodbury_;
+  std::unique_ptr<SchurPreconditioner> schur_;  // only with EmuPreconditioner::Schur
   double factor_seconds_ = 0, modes_seconds_ = 0;
   mutable std::vector<double> tet_energy_;
 };

@@ -29,6 +29,10 @@ struct SolverOptions {
 };
 
 enum class EmuStep { Woodbury, NewtonKrylov };
+// Newton-Krylov preconditioner: the paper's Woodbury approximation (no
+// factorisation after setup), or the exact inverse through the position-space
+// Schur complement (a factorisation per lagged rebuild).
+enum class EmuPreconditioner { Woodbury, Schur };
 
 struct EmuOptions {
   double alpha = 0.0;      // absolute ACAP stiffness (Python passes alpha_rel * mu_ref)
@@ -36,6 +40,7 @@ struct EmuOptions {
   EmuStep step = EmuStep::NewtonKrylov;
   int cg_max_iterations = 500;   // per Newton-Krylov step
   double cg_forcing_max = 0.5;   // Eisenstat-Walker eta_k = min(max, sqrt(|g_k| / |g_0|))
+  EmuPreconditioner preconditioner = EmuPreconditioner::Woodbury;
   int preconditioner_refresh = 3;  // Newton-Krylov: rebuild the Woodbury preconditioner every n steps
 };
 

@@ -1,0 +1,52 @@
+#include "emu/solvers/schur_preconditioner.h"
+
+namespace emu {
+
+SchurPreconditioner::SchurPreconditioner(const Model& model, const Discretization& disc, const AcapOperator& acap,
+                                         double alpha)
+    : model_(model),
+      disc_(disc),
+      acap_(acap),
+      alpha_(alpha),
+      pattern_(model.tets, disc.free_index, disc.num_free, 3),
+      Ainv_(model.tets.rows()),
+      element_(model.tets.rows() * 144),
+      values_(pattern_.nnz()) {
+  factor_.analyze(pattern_.rows(), pattern_.col_ptr().data(), pattern_.row_index().data());
+}
+
+bool SchurPreconditioner::update(const std::vector<Mat9>& A) {
+  const Eigen::VectorXd& wv = acap_.weight_volume();
+  const long m = static_cast<long>(A.size());
+#pragma omp parallel for schedule(static)
+  for (long t = 0; t < m; ++t) {
+    Ainv_[t] = Eigen::LLT<Mat9>(A[t]).solve(Mat9::Identity());
+    // w V (I - alpha w V A^-1), symmetrised against roundoff
+    Mat9 M = -alpha_ * wv(t) * wv(t) * Ainv_[t];
+    M.diagonal().array() += wv(t);
+    M = (0.5 * (M + M.transpose())).eval();
+    Eigen::Map<Mat12>(element_.data() + t * 144) = position_hessian(disc_.geometry.grad[t], M);
+  }
+  pattern_.assemble(element_.data(), values_.data());
+  ok_ = factor_.factorize(values_.data());
+  return ok_;
+}
+
+void SchurPreconditioner::apply(const Mat9X& r, Mat9X& out) const {
+  const long m = r.cols();
+  out.resize(9, m);
+#pragma omp parallel for schedule(static)
+  for (long t = 0; t < m; ++t) out.col(t).noalias() = Ainv_[t] * r.col(t);
+  if (!ok_) return;
+  Eigen::MatrixX3d y;
+  acap_.apply_C(out, y);
+  // the position unknowns are interleaved (3 v + c), as in the assembled S
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> b = y, u(y.rows(), 3);
+  factor_.solve(b.data(), u.data(), 1);
+  Mat9X ct;
+  acap_.apply_CT(Eigen::MatrixX3d(u), ct);
+#pragma omp parallel for schedule(static)
+  for (long t = 0; t < m; ++t) out.col(t).noalias() += alpha_ * (Ainv_[t] * ct.col(t));
+}
+
+}  // namespace emu

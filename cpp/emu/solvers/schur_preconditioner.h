@@ -1,0 +1,44 @@
+#pragma once
+// An alternative Newton-Krylov preconditioner: the exact inverse of the
+// (filtered) EMU Hessian through its position-space Schur complement,
+//   H^-1 r = A^-1 r + alpha A^-1 C^T S^-1 C A^-1 r,
+//   S = K - alpha C A^-1 C^T = sum_t G_t^T [w V (I - alpha w V A_t^-1)] G_t,
+// a 3 #free x 3 #free sparse SPD matrix with the FEM pattern (as alpha grows,
+// S / alpha tends to the FEM Hessian). It costs a numeric factorisation per
+// rebuild, so it is rebuilt only every few Newton steps (lagged); between
+// rebuilds each application is two back-substitutions' worth of work.
+#include <memory>
+#include <vector>
+
+#include "emu/linalg/cholmod_factor.h"
+#include "emu/mesh/block_pattern.h"
+#include "emu/model/model.h"
+#include "emu/solvers/acap.h"
+
+namespace emu {
+
+class SchurPreconditioner {
+ public:
+  SchurPreconditioner(const Model& model, const Discretization& disc, const AcapOperator& acap, double alpha);
+
+  /// Rebuild from SPD blocks A_t; false if S could not be factorised.
+  bool update(const std::vector<Mat9>& A);
+
+  /// out = H^-1 r (9 x #T each).
+  void apply(const Mat9X& r, Mat9X& out) const;
+
+  double factor_nnz() const { return factor_.factor_nnz(); }
+
+ private:
+  const Model& model_;
+  const Discretization& disc_;
+  const AcapOperator& acap_;
+  double alpha_;
+  BlockPattern pattern_;
+  CholmodFactor factor_;
+  std::vector<Mat9> Ainv_;
+  std::vector<double> element_, values_;
+  bool ok_ = false;
+};
+
+}  // namespace emu

@@ -1,0 +1,134 @@
+"""Mesh input/output through emu.io (meshio underneath)."""
+import numpy as np
+import pytest
+
+import emu
+from emu.meshes import fusiform
+
+from conftest import small_scene
+
+
+@pytest.fixture
+def mesh():
+    m = fusiform(2)
+    part = np.where(m.is_tendon, 1, 0).astype(np.int32)
+    return m, part
+
+
+@pytest.mark.parametrize("ext", ["vtu", "msh", "mesh"])
+def test_round_trip(tmp_path, mesh, ext):
+    m, part = mesh
+    path = tmp_path / f"fusiform.{ext}"
+    emu.io.write(path, m.points, m.tets, cell_data={"part": part})
+    back = emu.io.read(path)
+    np.testing.assert_allclose(back.points, m.points, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(back.tets, m.tets)
+    assert back.part is not None, f"part labels lost in .{ext}: cell data {list(back.cell_data)}"
+    np.testing.assert_array_equal(back.part, part)
+
+
+def test_msh_is_written_as_gmsh(tmp_path, mesh):
+    """.msh means gmsh to emu's users (io's docs: gmsh physical groups), not ANSYS."""
+    m, part = mesh
+    path = tmp_path / "fusiform.msh"
+    emu.io.write(path, m.points, m.tets, cell_data={"part": part})
+    with open(path, "rb") as f:
+        head = f.read(11)
+    assert head == b"$MeshFormat", head
+
+
+def test_vtu_round_trip_keeps_fibers_and_loads_as_scene(tmp_path, mesh):
+    m, part = mesh
+    path = tmp_path / "fusiform.vtu"
+    emu.io.write(path, m.points, m.tets, cell_data={"part": part, "fiber": m.fibers})
+    back = emu.io.read(path)
+    np.testing.assert_allclose(back.fiber, m.fibers, atol=1e-12)
+    scene = emu.io.load_scene(path)  # no scene.json: parts named part<id>, kind muscle
+    assert sorted(scene.parts) == ["part0", "part1"]
+    np.testing.assert_array_equal(np.sort(scene.parts["part1"].tets), np.flatnonzero(m.is_tendon))
+    np.testing.assert_allclose(scene.parts["part0"].fibers, m.fibers[~m.is_tendon], atol=1e-12)
+
+
+def test_load_scene_needs_part_labels(tmp_path, mesh):
+    m, _ = mesh
+    path = tmp_path / "nolabels.vtu"
+    emu.io.write(path, m.points, m.tets)
+    with pytest.raises(ValueError, match="no part labels"):
+        emu.io.load_scene(path)
+
+
+def solved_scene():
+    s, m = small_scene(2)
+    sol = emu.solve(s, {"belly": 5e4}, "fem")
+    assert sol.converged
+    return s, m, sol
+
+
+def test_write_solution(tmp_path):
+    import meshio
+
+    s, m, sol = solved_scene()
+    path = tmp_path / "frame.vtu"
+    emu.io.write_solution(path, s, sol)
+    out = meshio.read(path)
+    np.testing.assert_allclose(out.points, sol.positions, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(out.cells_dict["tetra"], s.tets)
+    np.testing.assert_allclose(out.point_data["displacement"], sol.positions - s.points, rtol=0, atol=1e-12)
+    cd = {k: np.asarray(v[0]) for k, v in out.cell_data.items()}
+    assert {"part", "J", "fiber"} <= set(cd)
+    # part: index of the part in scene.parts
+    expected_part = np.where(m.is_tendon, list(s.parts).index("tendons"), list(s.parts).index("belly"))
+    np.testing.assert_array_equal(cd["part"].ravel(), expected_part)
+    # J: volume ratio, computed here from the positions
+    def vols(x):
+        p = x[s.tets]
+        return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]))
+    np.testing.assert_allclose(cd["J"].ravel(), vols(sol.positions) / vols(s.points), rtol=1e-10)
+    assert np.ptp(cd["J"]) > 1e-3  # not trivially 1
+    # fibre: unit deformed direction F u on muscle tets, zero on tendons
+    fib = cd["fiber"].reshape(-1, 3)
+    belly = ~m.is_tendon
+    np.testing.assert_allclose(np.linalg.norm(fib[belly], axis=1), 1.0, atol=1e-10)
+    np.testing.assert_array_equal(fib[m.is_tendon], 0.0)
+    p, q = s.points[s.tets], sol.positions[s.tets]
+    Dm = np.stack([p[:, k] - p[:, 0] for k in (1, 2, 3)], axis=2)
+    Ds = np.stack([q[:, k] - q[:, 0] for k in (1, 2, 3)], axis=2)
+    F = Ds @ np.linalg.inv(Dm)
+    fu = np.einsum("tij,tj->ti", F[belly], m.fibers[belly])
+    np.testing.assert_allclose(fib[belly], fu / np.linalg.norm(fu, axis=1, keepdims=True), atol=1e-10)
+
+
+def test_write_solution_records_activation(tmp_path):
+    import meshio
+
+    s, m, sol = solved_scene()
+    path = tmp_path / "frame.vtu"
+    emu.io.write_solution(path, s, sol)
+    act = np.asarray(meshio.read(path).cell_data["activation"][0]).ravel()
+    np.testing.assert_allclose(act[~m.is_tendon], 5e4)
+    np.testing.assert_allclose(act[m.is_tendon], 0.0)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="not found"):
+        emu.io.read(tmp_path / "nope.vtu")
+    with pytest.raises(FileNotFoundError):
+        emu.io.load_scene(tmp_path / "nope.vtu")
+
+
+def test_file_without_tets(tmp_path):
+    import meshio
+
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    tris = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
+    path = tmp_path / "surface.vtu"
+    meshio.write_points_cells(path, pts, [("triangle", tris)])
+    with pytest.raises(ValueError, match="no tetrahedra"):
+        emu.io.read(path)
+
+
+def test_unreadable_file(tmp_path):
+    path = tmp_path / "garbage.vtu"
+    path.write_text("this is not a mesh")
+    with pytest.raises(ValueError, match="could not read"):
+        emu.io.read(path)
