@@ -2,11 +2,9 @@
 numpy discretisation (G, volumes) that does not go through emu's C++ code."""
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 import emu
 from emu.meshes import fusiform
@@ -29,11 +27,6 @@ def small_scene(r=2, pin="proximal", tendon_fraction=0.12, **muscle_kw):
     elif pin == "both":
         s.pin(np.concatenate([m.proximal, m.distal]))
     return s, m
-
-
-@pytest.fixture
-def scene2():
-    return small_scene(2)
 
 
 def rest_geometry(points, tets):
@@ -74,8 +67,3 @@ def vecF(F):
 def unvecF(rows):
     return np.asarray(rows).reshape(-1, 3, 3).transpose(0, 2, 1)
 
-
-def quiet_scene(points, tets):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", emu.MeshWarning)
-        return emu.Scene(points, tets)

@@ -10,7 +10,7 @@ import scipy.linalg as sl
 import emu
 from emu.meshes import fusiform
 
-from conftest import gradient_operator, quiet_scene, small_scene
+from conftest import gradient_operator, small_scene
 
 
 # ------------------------------------------------------------------ rest state

@@ -65,7 +65,6 @@ def _demo(args):
     for method, kw in runs:
         t0 = time.perf_counter()
         sol = emu.Solver(scene, method, **kw).solve(act)
-        sol.settings["activation"] = act
         sols.append(sol)
         path = os.path.join(args.out, f"{sol.label}.vtu")
         emu.io.write_solution(path, scene, sol)
@@ -116,7 +115,6 @@ def _solve(args):
     act = _parse_activation(args.activation)
     kw = dict(alpha=args.alpha, step=args.step) if args.method == "emu" else {}
     sol = emu.Solver(scene, args.method, **kw).solve(act)
-    sol.settings["activation"] = act
     print(sol.summary())
     if args.out:
         emu.io.write_solution(args.out, scene, sol)

@@ -49,7 +49,7 @@ def read(path) -> TetMesh:
         raise FileNotFoundError(f"mesh file not found: {path}")
     try:
         mesh = meshio.read(path)
-    except Exception as e:  # meshio raises many types for unreadable files
+    except (Exception, SystemExit) as e:  # meshio raises many types, and some readers call sys.exit
         raise ValueError(f"could not read {path} as a mesh ({type(e).__name__}: {e})") from None
     blocks = [i for i, c in enumerate(mesh.cells) if c.type == "tetra"]
     if not blocks:
@@ -79,8 +79,11 @@ def write(path, points, tets, *, cell_data: dict | None = None, point_data: dict
     cells = [("tetra", np.asarray(tets, dtype=np.int64))]
     cd = {k: [np.asarray(v)] for k, v in (cell_data or {}).items()}
     pd = {k: np.asarray(v) for k, v in (point_data or {}).items()}
-    meshio.write_points_cells(os.fspath(path), np.asarray(points, dtype=np.float64), cells,
-                              point_data=pd or None, cell_data=cd or None)
+    path = os.fspath(path)
+    # meshio maps .msh to ANSYS first; gmsh is what users mean (and keeps cell data)
+    fmt = "gmsh" if path.lower().endswith(".msh") else None
+    meshio.write_points_cells(path, np.asarray(points, dtype=np.float64), cells,
+                              point_data=pd or None, cell_data=cd or None, file_format=fmt)
 
 
 def write_solution(path, scene, solution):

@@ -180,6 +180,8 @@ class Solver:
                     (n, 3) positions; for EMU, (m, 3, 3) deformation gradients)
         """
         load = self.load_case(activation, normalized, gravity, pin_positions)
+        settings = dict(self.settings)
+        settings["activation"] = dict(zip(self.scene.muscles, np.asarray(load.activation).tolist()))
         if initial is None:
             r = self._core.solve(load)
         else:
@@ -196,7 +198,7 @@ class Solver:
                         status=r.status, iterations=r.iterations, cg_iterations=r.cg_iterations,
                         time_s=r.time_s, setup_time_s=self.setup_time_s, energy=r.energy,
                         grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
-                        history=history, F=F, settings=dict(self.settings), filtered_steps=r.filtered_steps,
+                        history=history, F=F, settings=settings, filtered_steps=r.filtered_steps,
                         exact_attempts_failed=r.exact_attempts_failed)
 
     def _initial_array(self, initial):

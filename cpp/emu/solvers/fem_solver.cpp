@@ -111,8 +111,10 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   double E = energy_with(x, act, load.gravity);
   Eigen::VectorXd g;
   free_gradient(load, x, act, g);
+  // Round-off in P(F) scales with the largest modulus (lambda at nu near 0.5).
   const double force_scale =
-      (disc_.geometry.volume.array() * (model_.mu.array() + act.array())).sum() / bbox_diagonal(model_.rest);
+      (disc_.geometry.volume.array() * (model_.mu.array() + model_.lambda.array() + act.array())).sum() /
+      bbox_diagonal(model_.rest);
   Convergence conv{options_.rtol_grad, options_.rtol_energy, E, g.norm(), 1e-13 * force_scale};
   res.grad_norm0 = conv.g0;
   res.history.push_back({0, E, conv.g0, 0.0, seconds_since(t0), 0, 0});
@@ -122,6 +124,7 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
     res.status = "converged: initial state is in equilibrium";
   }
   Eigen::VectorXd d(nf * 3);
+  Eigen::MatrixX3d trial(x.rows(), 3);
   bool last_exact_ok = true;
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
     if (options_.interrupted && options_.interrupted()) {
@@ -174,7 +177,6 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
       res.status = "Newton direction is not a descent direction";
       break;
     }
-    Eigen::MatrixX3d trial(x.rows(), 3);
     auto ls = armijo_backtracking(
         [&](double s) {
           trial = x;
@@ -183,8 +185,22 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
         },
         E, slope, options_);
     if (!ls.success) {
-      res.status = "line search failed: no sufficient decrease along the Newton step";
-      break;
+      // At round-off the energy can no longer rank steps but the gradient can:
+      // take the full step if the energy is unchanged to round-off and |g| falls.
+      trial = x;
+      scatter(d, 1.0, trial);
+      const double E1 = energy_with(trial, act, load.gravity);
+      Eigen::VectorXd g1;
+      free_gradient(load, trial, act, g1);
+      if (std::abs(E1 - E) <= 1e-11 * (std::abs(E) + std::abs(conv.E0 - E)) && g1.norm() < g.norm()) {
+        ls.success = true;
+        ls.step = 1.0;
+        ls.energy = E1;
+      } else {
+        res.status = "stalled: no step along the Newton direction decreases the energy or the gradient "
+                     "(round-off level reached; loosen rtol_grad / rtol_energy)";
+        break;
+      }
     }
     scatter(d, ls.step, x);
     const double E_prev = E;

@@ -95,7 +95,9 @@ LineSearchResult armijo_backtracking(EnergyAt&& energy_at, double E0, double slo
   double s = s0;
   for (int b = 0; b <= o.max_backtracks; ++b) {
     const double E = energy_at(s);
-    if (std::isfinite(E) && E <= E0 + o.armijo * s * slope) {
+    // Strict decrease as well: at round-off the Armijo bound rounds to E0 and
+    // would accept zero-length progress forever.
+    if (std::isfinite(E) && E <= E0 + o.armijo * s * slope && E < E0) {
       r.step = s;
       r.energy = E;
       r.backtracks = b;
