@@ -47,7 +47,7 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=None, help="OpenMP/OpenBLAS threads (default: as set)")
     ap.add_argument("--activation", type=float, default=5e4, help="absolute activation a of the belly")
     ap.add_argument("--alpha", type=float, default=100.0, help="EMU alpha relative to the muscle shear modulus")
-    ap.add_argument("--modes", type=int, default=48)
+    ap.add_argument("--modes", type=int, default=24)
     ap.add_argument("--woodbury-max-iterations", type=int, default=3000,
                     help="cap for the paper's quasi-Newton step (it may need thousands)")
     ap.add_argument("--skip-woodbury", action="store_true", help="do not run the paper's quasi-Newton step")

@@ -81,7 +81,7 @@ class Solver:
     threads       OpenMP and OpenBLAS threads (None: leave as is)
     """
 
-    def __init__(self, scene: Scene, method: str = "emu", *, alpha: float = 100.0, modes: int = 48,
+    def __init__(self, scene: Scene, method: str = "emu", *, alpha: float = 100.0, modes: int = 24,
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
                  max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "woodbury",
                  preconditioner_refresh: int = 3,

@@ -331,12 +331,10 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     auto ls = armijo_backtracking(
         [&](double s) { return energy_along(c, F, Fx, &d, &Fd, s) - Wx - s * Wdx; }, E, slope, options_);
     if (!ls.success) {
-      // At round-off the energy can no longer rank steps but the gradient can:
-      // take the full step if the energy is unchanged to round-off and |g| falls.
       const double E1 = energy_along(c, F, Fx, &d, &Fd, 1.0) - Wx - Wdx;
       Mat9X F1 = F + d, Fx1 = Fx + Fd, g1;
       gradient_into(c, F1, Fx1, g1);
-      if (std::abs(E1 - E) <= 1e-11 * (std::abs(E) + std::abs(conv.E0 - E)) && g1.norm() < gn) {
+      if (accept_at_roundoff(E1, g1.norm(), E, gn, conv.E0)) {
         ls.success = true;
         ls.step = 1.0;
         ls.energy = E1;

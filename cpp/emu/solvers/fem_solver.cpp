@@ -185,14 +185,12 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
         },
         E, slope, options_);
     if (!ls.success) {
-      // At round-off the energy can no longer rank steps but the gradient can:
-      // take the full step if the energy is unchanged to round-off and |g| falls.
       trial = x;
       scatter(d, 1.0, trial);
       const double E1 = energy_with(trial, act, load.gravity);
       Eigen::VectorXd g1;
       free_gradient(load, trial, act, g1);
-      if (std::abs(E1 - E) <= 1e-11 * (std::abs(E) + std::abs(conv.E0 - E)) && g1.norm() < g.norm()) {
+      if (accept_at_roundoff(E1, g1.norm(), E, g.norm(), conv.E0)) {
         ls.success = true;
         ls.step = 1.0;
         ls.energy = E1;

@@ -36,7 +36,7 @@ enum class EmuPreconditioner { Woodbury, Schur };
 
 struct EmuOptions {
   double alpha = 0.0;      // absolute ACAP stiffness (Python passes alpha_rel * mu_ref)
-  int modes = 48;          // k: ACAP modes in the Woodbury term (rounded up to a multiple of 3)
+  int modes = 24;          // k: ACAP modes in the Woodbury term (rounded up to a multiple of 3)
   EmuStep step = EmuStep::NewtonKrylov;
   int cg_max_iterations = 500;   // per Newton-Krylov step
   double cg_forcing_max = 0.5;   // Eisenstat-Walker eta_k = min(max, sqrt(|g_k| / |g_0|))
@@ -87,6 +87,13 @@ struct LineSearchResult {
   int backtracks = 0;
   bool success = false;
 };
+
+/// When no step lowers the energy, the energy has hit round-off: it can no
+/// longer rank steps, but the gradient can. Accept the full step if it leaves
+/// the energy unchanged to round-off and lowers the gradient norm.
+inline bool accept_at_roundoff(double E_full, double g_full, double E, double g, double E0) {
+  return std::abs(E_full - E) <= 1e-11 * (std::abs(E) + std::abs(E0 - E)) && g_full < g;
+}
 
 template <class EnergyAt>
 LineSearchResult armijo_backtracking(EnergyAt&& energy_at, double E0, double slope,
