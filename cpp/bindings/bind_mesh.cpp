@@ -2,6 +2,7 @@
 #include <pybind11/stl.h>
 
 #include "bind.h"
+#include "emu/mesh/harmonic_field.h"
 #include "emu/mesh/tet_geometry.h"
 
 namespace py = pybind11;
@@ -20,5 +21,10 @@ void bind_mesh(py::module_& m) {
         return py::make_tuple(g.volume, out);
       },
       py::arg("X"), py::arg("T"), "(volumes #T, gradients #T by 12: row t = b_0, b_1, b_2, b_3)");
+  m.def("harmonic_field", &harmonic_field, py::arg("X"), py::arg("T"), py::arg("fixed"), py::arg("values"),
+        py::call_guard<py::gil_scoped_release>(),
+        "P1 Laplace solve on tets T with values fixed at vertex ids -> #V field");
+  m.def("tet_gradients", &tet_gradients, py::arg("X"), py::arg("T"), py::arg("phi"),
+        "per-tet gradient of a P1 field -> #T by 3");
 }
 }  // namespace emu::bindings

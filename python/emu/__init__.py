@@ -9,11 +9,11 @@
 from . import _core
 from .scene import Scene, Part, MeshWarning, lame
 from .solve import Solver, Solution, solve
-from . import io, meshes
+from . import fibers, io, meshes
 
 __version__ = "0.1.0"
 
-__all__ = ["Scene", "Part", "MeshWarning", "lame", "Solver", "Solution", "solve", "io", "meshes", "info",
+__all__ = ["Scene", "Part", "MeshWarning", "lame", "Solver", "Solution", "solve", "io", "meshes", "fibers", "info",
            "vertex_error"]
 
 

@@ -113,11 +113,15 @@ def write_solution(path, scene, solution):
           point_data={"displacement": x - scene.points})
 
 
-def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, fix_bones=True, warn=True):
+def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, fix_bones=True, warn=True,
+               fibers="file"):
     """A Scene from a labelled tet mesh (the shared scenes, or any mesh with a
     ``part`` label and ``fiber`` cell data): parts of kind ``muscle`` become
-    muscles with the file's fibres, ``tendon`` tendons, ``bone`` fixed bones
-    (their vertices pinned)."""
+    muscles with the file's fibres (fibers="file") or a Laplace field between
+    their two bone attachments (fibers="laplace"), ``tendon`` tendons, ``bone``
+    fixed bones (their vertices pinned)."""
+    if fibers not in ("file", "laplace"):
+        raise ValueError(f"fibers must be 'file' or 'laplace', got {fibers!r}")
     from .scene import Scene
 
     mesh = read(path)
@@ -134,8 +138,12 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, fix_b
         kind = mesh.part_kinds.get(int(pid), "muscle")
         idx = np.flatnonzero(part == pid)
         if kind == "muscle":
+            if fibers == "laplace":
+                scene.add_muscle(name, idx, None, youngs=muscle_youngs, poisson=poisson)
+                continue
             if fib is None:
-                raise ValueError(f"{path}: muscle part '{name}' needs 'fiber' cell data")
+                raise ValueError(f"{path}: muscle part '{name}' needs 'fiber' cell data (or load with "
+                                 "fibers='laplace')")
             scene.add_muscle(name, idx, fib[idx], youngs=muscle_youngs, poisson=poisson)
         elif kind == "tendon":
             scene.add_tendon(name, idx, poisson=poisson)
@@ -145,4 +153,6 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, fix_b
             scene.add_bone(name, idx, youngs=bone_youngs, poisson=poisson)
         else:
             raise ValueError(f"{path}: part '{name}' has unknown kind '{kind}' (muscle, tendon or bone)")
+    if fibers == "laplace":
+        scene.resolve_fibers()
     return scene

@@ -92,18 +92,33 @@ class Scene:
         self.parts[part.name] = part
         return part
 
-    def add_muscle(self, name: str, tets, fibers=None, *, youngs: float = 6e4, poisson: float = 0.49,
-                   density: float = 1060.0, max_activation: float = 1e5, acap_weight: float = 1.0) -> Part:
+    def add_muscle(self, name: str, tets, fibers=None, *, origin=None, insertion=None, youngs: float = 6e4,
+                   poisson: float = 0.49, density: float = 1060.0, max_activation: float = 1e5,
+                   acap_weight: float = 1.0) -> Part:
         """A contractile part.
 
         tets     tet ids (or a boolean mask over all tets)
-        fibers   (len(tets), 3) fibre directions (normalised here) or one (3,) direction for all
+        fibers   (len(tets), 3) fibre directions (normalised here) or one (3,) direction for all;
+                 None: a Laplace field from ``origin`` to ``insertion`` (vertex ids), or, if those
+                 are not given either, between the muscle's two bone attachments (resolved when
+                 the scene is solved: add the bones first or later)
         max_activation  the activation a that a normalised activation of 1 means
         """
         idx = self._tet_ids(name, tets)
         lame(youngs, poisson)
+        if not max_activation > 0:
+            raise ValueError(f"muscle '{name}': max_activation must be positive")
         if fibers is None:
-            raise ValueError(f"muscle '{name}' needs fibre directions (one per tet, or one for all)")
+            if (origin is None) != (insertion is None):
+                raise ValueError(f"muscle '{name}': give both origin and insertion vertex ids, or neither")
+            f = None
+            if origin is not None:
+                from .fibers import laplace_fibers
+                try:
+                    f = laplace_fibers(self.points, self.tets[idx], origin, insertion)
+                except ValueError as e:
+                    raise ValueError(f"muscle '{name}': {e}") from None
+            return self._add(Part(name, "muscle", idx, youngs, poisson, density, acap_weight, f, max_activation))
         f = np.asarray(fibers, dtype=np.float64)
         if f.shape == (3,):
             f = np.tile(f, (len(idx), 1))
@@ -114,8 +129,6 @@ class Scene:
         norm = np.linalg.norm(f, axis=1)
         if np.any(norm < 1e-12):
             raise ValueError(f"muscle '{name}': {np.sum(norm < 1e-12)} fibre direction(s) are zero")
-        if not max_activation > 0:
-            raise ValueError(f"muscle '{name}': max_activation must be positive")
         return self._add(Part(name, "muscle", idx, youngs, poisson, density, acap_weight, f / norm[:, None],
                               max_activation))
 
@@ -196,6 +209,23 @@ class Scene:
         pos[where] = self.pin_targets
         return ids, pos
 
+    def resolve_fibers(self):
+        """Give every muscle without fibres a Laplace field between its two bone attachments."""
+        from .fibers import attachments, laplace_fibers
+
+        bones = {p.name: p.tets for p in self.parts.values() if p.kind == "bone"}
+        for p in self.parts.values():
+            if p.kind != "muscle" or p.fibers is not None:
+                continue
+            att = attachments(self.tets, p.tets, bones)
+            if len(att) != 2:
+                found = ", ".join(f"{k} ({len(v)} vertices)" for k, v in att.items()) or "none"
+                raise ValueError(f"muscle '{p.name}' has no fibres and {len(att)} bone attachment(s) ({found}); "
+                                 "fibres from attachments need exactly two: pass fibers=, or origin= and "
+                                 "insertion= vertex ids")
+            (_, origin), (_, insertion) = att.items()
+            p.fibers = laplace_fibers(self.points, self.tets[p.tets], origin, insertion)
+
     def validate(self):
         if not self.parts:
             raise ValueError("the scene has no parts: add_muscle/add_tendon first")
@@ -231,6 +261,7 @@ class Scene:
     def build_model(self) -> "_core.Model":
         """The flat arrays the C++ solvers take (tets of fixed bones left out)."""
         self.validate()
+        self.resolve_fibers()
         keep = self.model_tets
         m = len(self.tets)
         mu, lam, rho, w = (np.empty(m) for _ in range(4))

@@ -1,0 +1,60 @@
+"""Muscle fibre directions from a Laplace (harmonic) field between attachments.
+
+Per muscle: solve the Laplace equation on the muscle's tets with value -1 on
+its origin vertices and +1 on its insertion vertices; the fibre of each tet is
+the normalised gradient of that field (EMU.md section 6). The attachments of a
+muscle are its vertices shared with bone tets.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import _core
+
+__all__ = ["laplace_fibers", "attachments", "fiber_angle_degrees"]
+
+
+def laplace_fibers(points, tets, origin, insertion) -> np.ndarray:
+    """points  (n, 3); tets  (k, 4) the muscle's tets; origin, insertion  vertex ids.
+    Returns (k, 3) unit fibre directions pointing from origin to insertion."""
+    points = np.asarray(points, dtype=np.float64)
+    tets = np.asarray(tets, dtype=np.int64)
+    origin = np.unique(np.asarray(origin, dtype=np.int64).ravel())
+    insertion = np.unique(np.asarray(insertion, dtype=np.int64).ravel())
+    if len(origin) == 0 or len(insertion) == 0:
+        raise ValueError("laplace_fibers needs at least one origin and one insertion vertex")
+    if np.intersect1d(origin, insertion).size:
+        raise ValueError("origin and insertion vertex sets overlap")
+    in_muscle = np.zeros(len(points), bool)
+    in_muscle[tets.ravel()] = True
+    for name, ids in (("origin", origin), ("insertion", insertion)):
+        if ids.min() < 0 or ids.max() >= len(points) or not in_muscle[ids].all():
+            raise ValueError(f"{name} vertices must be vertices of the muscle's tets")
+    fixed = np.concatenate([origin, insertion])
+    values = np.concatenate([-np.ones(len(origin)), np.ones(len(insertion))])
+    phi = _core.harmonic_field(points, tets.astype(np.int32), fixed.astype(np.int32), values)
+    g = np.asarray(_core.tet_gradients(points, tets.astype(np.int32), phi))
+    norm = np.linalg.norm(g, axis=1)
+    if np.any(norm <= 1e-12 * norm.max()):
+        raise ValueError(f"{np.sum(norm <= 1e-12 * norm.max())} tet(s) have no fibre direction (the field is "
+                         "flat there: all four vertices fixed to the same value?)")
+    return g / norm[:, None]
+
+
+def attachments(tets: np.ndarray, muscle_tets: np.ndarray, bones: dict) -> dict:
+    """Muscle vertices shared with each bone: {bone name: vertex ids} (bones
+    with no shared vertex are left out). bones: {name: tet ids}."""
+    mv = np.unique(tets[muscle_tets].ravel())
+    out = {}
+    for name, bt in bones.items():
+        shared = np.intersect1d(mv, np.unique(tets[bt].ravel()))
+        if len(shared):
+            out[name] = shared
+    return out
+
+
+def fiber_angle_degrees(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle between fibre lines (sign-free: a fibre and its reverse are the same), degrees."""
+    a = a / np.linalg.norm(a, axis=1, keepdims=True)
+    b = b / np.linalg.norm(b, axis=1, keepdims=True)
+    return np.degrees(np.arccos(np.clip(np.abs(np.sum(a * b, axis=1)), 0.0, 1.0)))
