@@ -273,8 +273,12 @@ def test_wrong_fibers_shape():
         s.add_muscle("belly", ~m.is_tendon, np.ones((int((~m.is_tendon).sum()), 2)))
     with pytest.raises(ValueError, match="fibre direction"):
         s.add_muscle("belly", ~m.is_tendon, np.zeros(3))
-    with pytest.raises(ValueError, match="needs fibre directions"):
-        s.add_muscle("belly", ~m.is_tendon)
+    # no fibres and no bones to take them from: the solve says what to pass
+    s.add_muscle("belly", ~m.is_tendon)
+    s.add_tendon("tendons", m.is_tendon)
+    s.pin(m.proximal)
+    with pytest.raises(ValueError, match=r"no fibres and 0 bone attachment\(s\).*fibers="):
+        emu.solve(s, {"belly": 1e4}, "fem")
 
 
 def test_unanchored_scene():
