@@ -2,6 +2,7 @@
 
     emu demo [--out DIR] [--tets N] [--threads T] [--woodbury]
     emu solve MESH --activation NAME=A [NAME=A ...] [--method emu|fem] [--out FILE.vtu]
+    emu run SCENE.toml [--out DIR]
     emu info [MESH]
 """
 from __future__ import annotations
@@ -122,6 +123,21 @@ def _solve(args):
     return 0 if sol.converged else 1
 
 
+def _run(args):
+    from .run import run_scene
+    from .scenefile import load_scene_file
+
+    spec = load_scene_file(args.scene)
+    if args.threads:
+        spec.solver["threads"] = args.threads
+    log = run_scene(spec, args.out)
+    print(f"wrote {args.out or spec.output['dir']}: frame_*.vtu + series.pvd (ParaView), frame_*.obj (Blender), "
+          "log.json")
+    if log["interrupted"]:
+        return 130
+    return 0 if all(f["converged"] for f in log["frames"]) else 1
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="emu", description="EMU muscle simulation (and its FEM reference)")
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -142,6 +158,11 @@ def main(argv=None):
     s.add_argument("--threads", type=int, default=None)
     s.add_argument("--out", default=None, help="write the result here (.vtu)")
     s.set_defaults(func=_solve)
+    r = sub.add_parser("run", help="run a scene file (TOML/JSON) over its frames")
+    r.add_argument("scene")
+    r.add_argument("--out", default=None, help="output folder (default: the scene's output.dir)")
+    r.add_argument("--threads", type=int, default=None)
+    r.set_defaults(func=_run)
     i = sub.add_parser("info", help="BLAS, threads; with a mesh: parts, defects, memory estimate")
     i.add_argument("mesh", nargs="?")
     i.set_defaults(func=_print_info)

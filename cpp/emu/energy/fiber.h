@@ -8,8 +8,10 @@
 
 namespace emu::fiber {
 
+/// a/2 (|F u|^2 - |u|^2) = a/2 (2 u.(E u) + |E u|^2) with E = F - I: no cancellation near rest.
 inline double energy(const Mat3& F, const Vec3& u, double a) {
-  return 0.5 * a * ((F * u).squaredNorm() - u.squaredNorm());
+  const Vec3 Eu = (F - Mat3::Identity()) * u;
+  return 0.5 * a * (2.0 * u.dot(Eu) + Eu.squaredNorm());
 }
 
 inline Mat3 stress(const Mat3& F, const Vec3& u, double a) { return a * (F * u) * u.transpose(); }

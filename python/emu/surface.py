@@ -1,0 +1,28 @@
+"""Boundary surface of a tet mesh (for OBJ output)."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+# outward faces of a positively oriented tet (a, b, c, d)
+_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+
+
+def boundary_faces(tets: np.ndarray) -> np.ndarray:
+    """Triangles that belong to exactly one tet, outward-oriented: (f, 3)."""
+    faces = tets[:, _FACES].reshape(-1, 3)
+    key = np.sort(faces, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return faces[counts[inverse.ravel()] == 1]
+
+
+def write_obj(path, points: np.ndarray, faces: np.ndarray):
+    """A triangle surface as Wavefront OBJ (1-based indices), for Blender."""
+    used = np.unique(faces)
+    remap = np.full(len(points), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    with open(os.fspath(path), "w") as f:
+        f.write("# emu surface\n")
+        np.savetxt(f, points[used], fmt="v %.9g %.9g %.9g")
+        np.savetxt(f, remap[faces] + 1, fmt="f %d %d %d")
