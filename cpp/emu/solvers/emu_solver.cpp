@@ -253,7 +253,12 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     res.status = "converged: initial state is in equilibrium";
   }
   std::vector<Mat9> A, A_exact;
-  const bool exact = options_.exact_when_definite && emu_.step == EmuStep::NewtonKrylov;
+  const bool exact_allowed = options_.exact_when_definite && emu_.step == EmuStep::NewtonKrylov;
+  // CG on an indefinite exact Hessian need not meet negative curvature: its
+  // step can be long and mostly cut by the line search. After such a step
+  // (step < 1/2) the filtered Hessian is used until a full step is taken again,
+  // as FEM does after a failed Cholesky.
+  bool exact_ok = true;
   // With exact Hessian products the Woodbury preconditioner may lag: it is
   // rebuilt (eigen-filtered blocks, SYRK) every preconditioner_refresh
   // iterations, or sooner when CG slows down by half since the last rebuild.
@@ -267,6 +272,8 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       res.status = "interrupted";
       break;
     }
+    const bool exact = exact_allowed && exact_ok;
+    if (exact_allowed && !exact) ++res.filtered_steps;
     const bool refresh = !exact || it == 1 || since_refresh >= emu_.preconditioner_refresh ||
                          (cg_after_refresh >= 0 && last_cg > 1.5 * cg_after_refresh + 5);
     if (refresh) {
@@ -360,6 +367,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     last_cg = cg_its;
     if (cg_after_refresh < 0) cg_after_refresh = cg_its;
     res.history.push_back({it, E, gn, ls.step, seconds_since(t0), cg_its, ls.backtracks});
+    if (exact_allowed) exact_ok = exact ? ls.step >= 0.5 : ls.step == 1.0;
     if (conv.test(E_prev, E, gn)) {
       res.converged = true;
       res.status = "converged";
