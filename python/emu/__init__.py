@@ -9,7 +9,7 @@
 from . import _core
 from .scene import Scene, Part, MeshWarning, lame
 from .solve import Solver, Solution, solve
-from . import fibers, io, meshes
+from . import activation, fibers, io, meshes, run, scenefile
 
 __version__ = "0.1.0"
 
