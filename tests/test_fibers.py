@@ -95,3 +95,47 @@ def test_attachments_lists_shared_vertices():
     assert list(att) == ["b"]
     expected = np.intersect1d(m.tets[muscle].ravel(), m.tets[bone].ravel())
     np.testing.assert_array_equal(att["b"], expected)
+
+
+def _bone_muscle_bone(r=3):
+    m = fusiform(r, tendon_fraction=0.0)
+    s = emu.Scene(m.points, m.tets, warn=False)
+    c = m.points[m.tets].mean(axis=1)[:, 2]
+    s.add_bone("proximal", c < 0.1 * m.length)
+    s.add_bone("distal", c > 0.9 * m.length)
+    s.add_muscle("belly", (c >= 0.1 * m.length) & (c <= 0.9 * m.length))
+    return s, m, c
+
+
+def test_split_tendons_by_distance_from_attachments():
+    s, m, c = _bone_muscle_bone()
+    before = s.parts["belly"].tets.copy()
+    t = s.split_tendons("belly", 0.15 * m.length, youngs=4.5e8)
+    belly = s.parts["belly"]
+    assert t.kind == "tendon" and t.name == "belly_tendon"
+    # a partition of the old muscle: nothing lost, nothing shared
+    np.testing.assert_array_equal(np.sort(np.concatenate([belly.tets, t.tets])), np.sort(before))
+    # tendon tets sit at both ends, the belly in the middle
+    zt, zb = c[t.tets], c[belly.tets]
+    assert zt.min() < 0.2 * m.length and zt.max() > 0.8 * m.length
+    assert zb.min() > 0.1 * m.length and zb.max() < 0.9 * m.length
+    assert np.all((zt < 0.3 * m.length) | (zt > 0.7 * m.length))
+    sol = emu.solve(s, {"belly": 3e4}, "fem")
+    assert sol.converged
+    assert len(s.parts["belly"].fibers) == len(belly.tets)
+
+
+def test_split_tendons_errors():
+    s, m, c = _bone_muscle_bone()
+    with pytest.raises(ValueError, match="smaller distance"):
+        s.split_tendons("belly", 100.0)
+    with pytest.raises(ValueError, match="no tet of 'belly'"):
+        s.split_tendons("belly", 1e-9)
+    with pytest.raises(ValueError, match="is a bone, not a muscle"):
+        s.split_tendons("proximal", 1.0)
+    with pytest.raises(ValueError, match="no part named"):
+        s.split_tendons("biceps", 1.0)
+    lone = emu.Scene(m.points, m.tets, warn=False)
+    lone.add_muscle("belly", np.arange(len(m.tets)), [0, 0, 1])
+    with pytest.raises(ValueError, match="no attachment"):
+        lone.split_tendons("belly", 1.0)

@@ -173,3 +173,16 @@ def test_boundary_surface_is_closed_and_outward():
     p = m.points
     vol = np.einsum("ij,ij->i", p[f[:, 0]], np.cross(p[f[:, 1]], p[f[:, 2]])).sum() / 6.0
     assert vol == pytest.approx(emu.checks.signed_volumes(p, m.tets).sum(), rel=1e-10)  # outward normals
+
+
+def test_emu_info_on_a_scene_file(tmp_path):
+    scene = _write(tmp_path, GOOD)
+    r = subprocess.run([sys.executable, "-m", "emu.cli", "info", str(scene)], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "BLAS" in r.stdout and "part belly: muscle" in r.stdout
+    assert "frames: 3 x 0.5 s" in r.stdout and "activation belly: 2 keys" in r.stdout
+    bad = _write(tmp_path, GOOD.replace("[frames]", "[frames]\nspeed = 1"), "bad.toml")
+    r = subprocess.run([sys.executable, "-m", "emu.cli", "info", str(bad)], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2 and "unknown key 'frames.speed'" in r.stderr

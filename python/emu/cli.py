@@ -25,14 +25,35 @@ def _print_info(args):
     print(f"BLAS: {i['config']}")
     print(f"      {i['library']}, {i['blas_threads']} thread(s); OpenMP: {i['omp_threads']} thread(s)")
     if args.mesh:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            scene = emu.io.load_scene(args.mesh, warn=False)
+        spec = None
+        if args.mesh.endswith((".toml", ".json")):
+            from .scenefile import load_scene_file
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                spec = load_scene_file(args.mesh)
+            scene = spec.scene
+        else:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                scene = emu.io.load_scene(args.mesh, warn=False)
         print(scene)
         for line in scene.mesh_report.lines():
             print("  " + line)
         for p in scene.parts.values():
             print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}")
+            if p.kind == "muscle":
+                att = scene.attachments(p.name)
+                desc = ", ".join(f"{b} ({len(v)} vertices)" for b, v in att.items()) or "none (pins only)"
+                print(f"    attachments: {desc}")
+        bones = [p.name for p in scene.parts.values() if p.kind == "bone"]
+        if bones:
+            print(f"  bones: {', '.join(bones)} (all fixed; joints between bones need moving bones: not yet)")
+        if spec is not None:
+            print(f"  frames: {spec.frames} x {spec.dt:g} s; solver: {spec.solver or 'defaults'}")
+            for name, curve in spec.curves.items():
+                kind = "per frame" if curve.per_frame is not None else f"{len(curve.keys)} keys, {curve.interpolation}"
+                print(f"  activation {name}: {kind}, {'normalised' if curve.normalized else 'absolute'}")
         ids, _ = scene.model_pins()
         print(f"  fixed vertices (pins, fixed bones): {len(ids)}")
         m, n = len(scene.model_tets), len(scene.points)
@@ -163,8 +184,9 @@ def main(argv=None):
     r.add_argument("--out", default=None, help="output folder (default: the scene's output.dir)")
     r.add_argument("--threads", type=int, default=None)
     r.set_defaults(func=_run)
-    i = sub.add_parser("info", help="BLAS, threads; with a mesh: parts, defects, memory estimate")
-    i.add_argument("mesh", nargs="?")
+    i = sub.add_parser("info", help="BLAS, threads; with a mesh or scene file: parts, attachments, defects, "
+                                    "memory estimate")
+    i.add_argument("mesh", nargs="?", help="a labelled mesh (.vtu, ...) or a scene file (.toml, .json)")
     i.set_defaults(func=_print_info)
     args = ap.parse_args(argv)
     try:

@@ -153,6 +153,56 @@ class Scene:
         lame(youngs, poisson)
         return self._add(Part(name, "bone", idx, youngs, poisson, density, 1.0))
 
+    def attachments(self, muscle: str) -> dict:
+        """{bone name: vertex ids} where the muscle shares vertices with a bone."""
+        from .fibers import attachments
+
+        p = self._part(muscle, "muscle")
+        return attachments(self.tets, p.tets, {b.name: b.tets for b in self.parts.values() if b.kind == "bone"})
+
+    def split_tendons(self, muscle: str, distance: float, *, name: str | None = None, **tendon_options) -> Part:
+        """Move the muscle's tets whose centroid lies within ``distance`` of one of
+        its bone attachments into a new tendon part (default name "<muscle>_tendon");
+        tendon_options go to add_tendon (youngs, poisson, density, acap_weight)."""
+        p = self._part(muscle, "muscle")
+        if not distance > 0:
+            raise ValueError(f"split_tendons: distance must be positive, got {distance}")
+        att = self.attachments(muscle)
+        if not att:
+            raise ValueError(f"muscle '{muscle}' shares no vertex with a bone: there is no attachment to "
+                             "measure from; label the tendon tets yourself (add_tendon)")
+        if p.fibers is None and len(att) == 2:
+            # fibres run between the bone attachments, which the split hides behind the tendons
+            from .fibers import laplace_fibers
+
+            (_, origin), (_, insertion) = att.items()
+            p.fibers = laplace_fibers(self.points, self.tets[p.tets], origin, insertion)
+        anchor = self.points[np.unique(np.concatenate(list(att.values())))]
+        c = self.points[self.tets[p.tets]].mean(axis=1)
+        near = np.zeros(len(c), bool)
+        for i in range(0, len(c), 4096):  # chunked: (chunk x attachments) distances
+            d2 = ((c[i:i + 4096, None, :] - anchor[None, :, :]) ** 2).sum(axis=2)
+            near[i:i + 4096] = d2.min(axis=1) <= distance * distance
+        if near.all():
+            raise ValueError(f"split_tendons: every tet of '{muscle}' lies within {distance} of an attachment; "
+                             "use a smaller distance")
+        if not near.any():
+            raise ValueError(f"split_tendons: no tet of '{muscle}' lies within {distance} of an attachment")
+        tendon_tets = p.tets[near]
+        self._owner[tendon_tets] = -1
+        p.tets = p.tets[~near]
+        if p.fibers is not None:
+            p.fibers = p.fibers[~near]
+        return self.add_tendon(name or f"{muscle}_tendon", tendon_tets, **tendon_options)
+
+    def _part(self, name: str, kind: str | None = None) -> Part:
+        if name not in self.parts:
+            raise ValueError(f"no part named '{name}' (parts: {', '.join(self.parts) or 'none'})")
+        p = self.parts[name]
+        if kind is not None and p.kind != kind:
+            raise ValueError(f"part '{name}' is a {p.kind}, not a {kind}")
+        return p
+
     # ------------------------------------------------------ boundary conditions
     def pin(self, vertex_ids, positions=None):
         """Fix vertices at their rest positions (or at ``positions``, (k, 3))."""
