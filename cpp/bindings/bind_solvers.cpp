@@ -84,6 +84,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("step", &EmuOptions::step)
       .def_readwrite("cg_max_iterations", &EmuOptions::cg_max_iterations)
       .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max)
+      .def_readwrite("cg_forcing_exponent", &EmuOptions::cg_forcing_exponent)
       .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh)
       .def_readwrite("preconditioner", &EmuOptions::preconditioner);
 

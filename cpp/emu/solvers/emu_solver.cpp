@@ -298,7 +298,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       d = -d;
     } else {
       // Inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker).
-      const double eta = std::min(emu_.cg_forcing_max, std::sqrt(gn / conv.g0));
+      const double eta = std::min(emu_.cg_forcing_max, std::pow(gn / conv.g0, emu_.cg_forcing_exponent));
       d.setZero(9, m);
       r = -g;
       precondition(r, z);

@@ -39,7 +39,8 @@ struct EmuOptions {
   int modes = 24;          // k: ACAP modes in the Woodbury term (rounded up to a multiple of 3)
   EmuStep step = EmuStep::NewtonKrylov;
   int cg_max_iterations = 500;   // per Newton-Krylov step
-  double cg_forcing_max = 0.5;   // Eisenstat-Walker eta_k = min(max, sqrt(|g_k| / |g_0|))
+  double cg_forcing_max = 0.5;       // Eisenstat-Walker eta_k = min(max, (|g_k| / |g_0|)^exponent)
+  double cg_forcing_exponent = 0.5;
   EmuPreconditioner preconditioner = EmuPreconditioner::Woodbury;
   int preconditioner_refresh = 3;  // Newton-Krylov: rebuild the Woodbury preconditioner every n steps
 };
