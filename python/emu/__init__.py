@@ -8,12 +8,12 @@
 """
 from . import _core
 from .scene import Scene, Part, MeshWarning, lame
-from .solve import Solver, Solution, solve
+from .solve import Solver, Solution, pose_about, rotation, solve
 from . import activation, fibers, io, meshes, run, scenefile
 
 __version__ = "0.1.0"
 
-__all__ = ["Scene", "Part", "MeshWarning", "lame", "Solver", "Solution", "solve", "io", "meshes", "fibers", "info",
+__all__ = ["Scene", "Part", "MeshWarning", "lame", "Solver", "Solution", "solve", "rotation", "pose_about", "io", "meshes", "fibers", "info",
            "vertex_error"]
 
 

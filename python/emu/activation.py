@@ -18,12 +18,14 @@ class Curve:
     per_frame      one value per frame (instead of keys)
     interpolation  "linear", "smooth" (smoothstep between keys: C1, never overshoots) or "step"
     normalized     values in [0, 1] times the muscle's max_activation; False: absolute a
+    signed         any finite values (bone angles, offsets): no range checks
     Before the first key the first value holds, after the last key the last.
     """
     keys: np.ndarray | None = None
     per_frame: np.ndarray | None = None
     interpolation: str = "linear"
     normalized: bool = True
+    signed: bool = False
 
     def __post_init__(self):
         if (self.keys is None) == (self.per_frame is None):
@@ -41,7 +43,11 @@ class Curve:
         else:
             self.per_frame = np.asarray(self.per_frame, dtype=np.float64).ravel()
             vals = self.per_frame
-        if not np.all(np.isfinite(vals)) or np.any(vals < 0):
+        if not np.all(np.isfinite(vals)):
+            raise ValueError("curve values must be finite")
+        if self.signed:
+            return
+        if np.any(vals < 0):
             raise ValueError("activation values must be finite and >= 0")
         if self.normalized and np.any(vals > 1):
             raise ValueError("normalised activation values must lie in [0, 1] (set normalized = false for "

@@ -45,7 +45,7 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print) -> di
     try:
         for k in range(spec.frames):
             act = spec.activation(k)
-            sol = solver.solve(act, initial=prev)
+            sol = solver.solve(act, bone_poses=spec.bone_poses(k) or None, initial=prev)
             prev = sol
             name = f"frame_{k:04d}"
             if spec.output.get("vtu", True):

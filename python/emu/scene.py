@@ -143,12 +143,13 @@ class Scene:
 
     def add_bone(self, name: str, tets, *, youngs: float = 1e10, poisson: float = 0.49,
                  density: float = 1900.0, fixed: bool = True) -> Part:
-        """A bone. Fixed bones hold their vertices at rest: their tets carry no
-        unknowns and are left out of the solve; muscle vertices they share are
-        attachments. (Moving bones, joints between bones: not yet available.)"""
+        """A bone. A bone is rigid and prescribed: at rest, or scripted per solve
+        (Solver.solve(bone_poses=...)); its tets carry no unknowns and are left out
+        of the solve; muscle vertices it shares are attachments. (Bones swung by
+        the muscles, with joints as constraints: not yet available.)"""
         if not fixed:
-            raise NotImplementedError(f"bone '{name}': moving bones are not available yet; use fixed=True "
-                                      "or pin the bone's vertices along a scripted path with scene.pin")
+            raise NotImplementedError(f"bone '{name}': bones moved by the muscles are not available yet; use "
+                                      "fixed=True (the bone can still be scripted with bone_poses=)")
         idx = self._tet_ids(name, tets)
         lame(youngs, poisson)
         return self._add(Part(name, "bone", idx, youngs, poisson, density, 1.0))

@@ -40,6 +40,12 @@
     interpolation = "smooth"     # "linear", "smooth" or "step"
     normalized = true            # values in [0, 1] x max_activation; false: absolute a
 
+    [bones.radius]               # a scripted bone (bones are fixed unless scripted):
+    axis = [0.0, 0.0, 1.0]       # rotation axis through `center`, angle keyframes in degrees
+    center = [0.0, 0.0, 0.0]
+    angle = [[0.0, 0.0], [1.0, 30.0]]
+    interpolation = "smooth"
+
     [output]
     dir = "emu_run"              # `emu run --out` overrides it
     vtu = true                   # a VTU per frame and a .pvd series (ParaView)
@@ -75,8 +81,10 @@ _SCHEMA = {
                "preconditioner_refresh": int, "exact_when_definite": bool, "threads": int},
     "frames": {"count": int, "dt": float},
     "activation": "table of tables",
+    "bones": "table of tables",
     "output": {"dir": str, "vtu": bool, "obj": bool},
 }
+_BONE_KEYS = {"axis": list, "center": list, "angle": list, "interpolation": str}
 _MATERIAL_KEYS = {"youngs": float, "poisson": float, "density": float, "max_activation": float,
                   "acap_weight": float}
 _CURVE_KEYS = {"keys": list, "per_frame": list, "interpolation": str, "normalized": bool}
@@ -89,8 +97,17 @@ class SceneSpec:
     frames: int
     dt: float
     curves: dict                          # muscle name -> Curve
+    bones: dict = field(default_factory=dict)  # scripted bone -> (axis, center, angle Curve)
     output: dict = field(default_factory=lambda: {"dir": "emu_run", "vtu": True, "obj": True})
     source: str = ""
+
+    def bone_poses(self, frame: int) -> dict:
+        """{bone: (R, t)} of the scripted bones at a frame."""
+        from .solve import pose_about
+
+        t = frame * self.dt
+        return {name: pose_about(axis, curve.value(frame, t), center)
+                for name, (axis, center, curve) in self.bones.items()}
 
     def activation(self, frame: int) -> dict:
         """{muscle: absolute a} at a frame."""
@@ -222,6 +239,28 @@ def load_scene_file(path) -> SceneSpec:
         if curves[name].per_frame is not None and len(curves[name].per_frame) < count:
             raise SceneFileError(f"activation.{name}.per_frame has {len(curves[name].per_frame)} values for "
                                  f"{count} frames")
+    bones = {}
+    for name, spec in data.get("bones", {}).items():
+        part = scene.parts.get(name)
+        if part is None or part.kind != "bone":
+            known = [p.name for p in scene.parts.values() if p.kind == "bone"]
+            raise SceneFileError(f"bones.{name}: no bone named '{name}' (bones: {', '.join(known) or 'none'})")
+        _check_table(spec, _BONE_KEYS, f"bones.{name}")
+        for key in ("axis", "center", "angle"):
+            if key not in spec:
+                raise SceneFileError(f"bones.{name}: missing '{key}'")
+        for key in ("axis", "center"):
+            v = spec[key]
+            if len(v) != 3 or not all(_type_ok(x, float) for x in v):
+                raise SceneFileError(f"bones.{name}.{key} must be three numbers, got {v!r}")
+        if not any(spec["axis"]):
+            raise SceneFileError(f"bones.{name}.axis must be non-zero")
+        try:
+            curve = Curve(keys=spec["angle"], interpolation=spec.get("interpolation", "linear"), signed=True)
+        except ValueError as e:
+            raise SceneFileError(f"bones.{name}.angle: {e}") from None
+        bones[name] = (np.asarray(spec["axis"], float), np.asarray(spec["center"], float), curve)
     output = {"dir": "emu_run", "vtu": True, "obj": True}
     output.update(data.get("output", {}))
-    return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, output=output, source=path)
+    return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, bones=bones, output=output,
+                     source=path)

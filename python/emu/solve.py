@@ -9,7 +9,7 @@ import numpy as np
 from . import _core
 from .scene import Scene
 
-__all__ = ["Solver", "Solution", "solve", "METHODS", "STEPS"]
+__all__ = ["Solver", "Solution", "solve", "rotation", "pose_about", "METHODS", "STEPS"]
 
 METHODS = ("emu", "fem")
 STEPS = ("newton-krylov", "woodbury")
@@ -151,7 +151,40 @@ class Solver:
             a[names.index(name)] = v
         return a
 
-    def load_case(self, activation=None, normalized=False, gravity=None, pin_positions=None):
+    def _bone_targets(self, bone_poses, ids, targets):
+        """Move the vertices of scripted bones: x = R X + t for each {bone: (R, t)}."""
+        if not isinstance(bone_poses, dict):
+            raise TypeError("bone_poses must be a dict {bone name: (R, t)} or {bone name: 4x4 matrix}")
+        bones = {p.name: p for p in self.scene.parts.values() if p.kind == "bone"}
+        moved = {}
+        for name, pose in bone_poses.items():
+            if name not in bones:
+                raise ValueError(f"bone_poses: no bone named '{name}' (bones: {', '.join(bones) or 'none'})")
+            R, t = _pose(name, pose)
+            verts = np.unique(self.scene.tets[bones[name].tets].ravel())
+            moved[name] = (verts, self.scene.points[verts] @ R.T + t)
+        targets = targets.copy()
+        diag = float(np.linalg.norm(self.scene.points.max(0) - self.scene.points.min(0)))
+        where = {}
+        for name, (verts, pos) in moved.items():
+            targets[np.searchsorted(ids, verts)] = pos
+            where[name] = dict(zip(verts.tolist(), pos))
+        # a vertex shared by two bones (a joint) must land in the same place under both poses
+        names = list(bones)
+        for i, a in enumerate(names):
+            va = np.unique(self.scene.tets[bones[a].tets].ravel())
+            for b in names[i + 1:]:
+                shared = np.intersect1d(va, np.unique(self.scene.tets[bones[b].tets].ravel()))
+                for v in shared:
+                    pa = where.get(a, {}).get(v, self.scene.points[v])
+                    pb = where.get(b, {}).get(v, self.scene.points[v])
+                    if np.linalg.norm(pa - pb) > 1e-9 * diag:
+                        raise ValueError(f"bones '{a}' and '{b}' share vertex {v}, which their poses put "
+                                         f"{np.linalg.norm(pa - pb):.3g} apart; a joint must stay together "
+                                         "(rotate about the joint: the hinge axis or ball centre)")
+        return targets
+
+    def load_case(self, activation=None, normalized=False, gravity=None, pin_positions=None, bone_poses=None):
         load = _core.LoadCase()
         load.activation = self.activation_vector(activation, normalized)
         g = self.scene.gravity if gravity is None else np.asarray(gravity, dtype=np.float64)
@@ -159,6 +192,8 @@ class Solver:
             raise ValueError(f"gravity must be a finite 3-vector, got {g!r}")
         load.gravity = g
         ids, targets = self.scene.model_pins()
+        if bone_poses:
+            targets = self._bone_targets(bone_poses, ids, targets)
         if pin_positions is not None:
             pins = np.asarray(pin_positions, dtype=np.float64)
             if pins.shape != (len(self.scene.pinned), 3):
@@ -172,14 +207,16 @@ class Solver:
         return load
 
     def solve(self, activation=None, *, normalized: bool = False, gravity=None, pin_positions=None,
-              initial=None) -> Solution:
+              bone_poses=None, initial=None) -> Solution:
         """Equilibrium under the given activations.
 
         activation  {muscle: a} absolute activation (or in [0, 1] with normalized=True)
+        bone_poses  {bone: (R, t)} (or a 4x4 rigid transform) placing scripted bones at
+                    x = R X + t; bones not listed stay at rest
         initial     warm start: a previous Solution of this solver (or, for FEM,
                     (n, 3) positions; for EMU, (m, 3, 3) deformation gradients)
         """
-        load = self.load_case(activation, normalized, gravity, pin_positions)
+        load = self.load_case(activation, normalized, gravity, pin_positions, bone_poses)
         settings = dict(self.settings)
         settings["activation"] = dict(zip(self.scene.muscles, np.asarray(load.activation).tolist()))
         if initial is None:
@@ -218,7 +255,42 @@ class Solver:
 
 
 def solve(scene: Scene, activation=None, method: str = "emu", *, normalized: bool = False, gravity=None,
-          initial=None, **options) -> Solution:
+          bone_poses=None, initial=None, **options) -> Solution:
     """Build a Solver for ``scene`` and solve once. options: see Solver."""
     return Solver(scene, method, **options).solve(activation, normalized=normalized, gravity=gravity,
-                                                  initial=initial)
+                                                  bone_poses=bone_poses, initial=initial)
+
+
+def _pose(name, pose):
+    """(R, t) from (R, t) or a 4x4 matrix; R must be a proper rotation."""
+    if isinstance(pose, (tuple, list)) and len(pose) == 2:
+        R, t = (np.asarray(p, dtype=np.float64) for p in pose)
+    else:
+        M = np.asarray(pose, dtype=np.float64)
+        if M.shape != (4, 4):
+            raise ValueError(f"pose of bone '{name}' must be (R, t) or a 4x4 matrix, got shape {M.shape}")
+        R, t = M[:3, :3], M[:3, 3]
+    if R.shape != (3, 3) or t.shape != (3,) or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+        raise ValueError(f"pose of bone '{name}': R must be a finite 3x3 and t a finite 3-vector")
+    if np.abs(R.T @ R - np.eye(3)).max() > 1e-9 or np.linalg.det(R) < 0:
+        raise ValueError(f"pose of bone '{name}': R is not a rotation (R^T R != I or det R < 0)")
+    return R, t
+
+
+def rotation(axis, degrees) -> np.ndarray:
+    """The rotation matrix about a unit axis by an angle in degrees (Rodrigues)."""
+    k = np.asarray(axis, dtype=np.float64)
+    n = np.linalg.norm(k)
+    if not n > 0:
+        raise ValueError("rotation axis must be non-zero")
+    k = k / n
+    a = np.radians(degrees)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * (K @ K)
+
+
+def pose_about(axis, degrees, center) -> tuple:
+    """(R, t) rotating by ``degrees`` about ``axis`` through ``center``: x = R (X - c) + c."""
+    R = rotation(axis, degrees)
+    c = np.asarray(center, dtype=np.float64)
+    return R, c - R @ c
