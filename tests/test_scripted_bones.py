@@ -119,3 +119,22 @@ angle = [[0.0, 0.0], [1.0, 20.0]]
     (tmp_path / "bad.toml").write_text(bad)
     with pytest.raises(emu.scenefile.SceneFileError, match="no bone named 'belly'"):
         emu.scenefile.load_scene_file(tmp_path / "bad.toml")
+
+
+def test_joints_are_detected():
+    s, m = _bone_muscle_bone()
+    assert s.joints() == []  # the two bones share no vertex
+    path = DATA / "simple_joint" / "simple_joint.vtu"
+    if not path.exists():
+        pytest.skip("shared data folder not present")
+    sc = emu.io.load_scene(path, warn=False)
+    (j,) = sc.joints()
+    assert j["kind"] == "hinge" and set(j["bones"]) == {"top_bone", "bottom_bone"}
+    np.testing.assert_array_equal(j["vertices"], [2450, 2451])
+    d = sc.points[2451] - sc.points[2450]
+    np.testing.assert_allclose(abs(j["axis"] @ d), np.linalg.norm(d))
+    # rotating about the detected axis through the detected centre keeps the hinge together
+    sol = emu.solve(sc, {}, "fem", bone_poses={"bottom_bone": emu.pose_about(j["axis"], 15, j["centre"])})
+    assert sol.converged
+    big = DATA / "big_muscle" / "big_muscle.vtu"
+    assert emu.io.load_scene(big, warn=False).joints() == []

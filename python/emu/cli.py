@@ -48,7 +48,15 @@ def _print_info(args):
                 print(f"    attachments: {desc}")
         bones = [p.name for p in scene.parts.values() if p.kind == "bone"]
         if bones:
-            print(f"  bones: {', '.join(bones)} (all fixed; joints between bones need moving bones: not yet)")
+            scripted = set(spec.bones) if spec is not None else set()
+            desc = ", ".join(f"{b} ({'scripted' if b in scripted else 'fixed'})" for b in bones)
+            print(f"  bones: {desc}")
+            for j in scene.joints():
+                where = f"vertices {j['vertices'].tolist()}" if len(j["vertices"]) <= 4 else \
+                    f"{len(j['vertices'])} vertices"
+                extra = f", axis {np.round(j['axis'], 6).tolist()}" if j["axis"] is not None else ""
+                print(f"  joint {j['bones'][0]} - {j['bones'][1]}: {j['kind']} at {where}, "
+                      f"centre {np.round(j['centre'], 6).tolist()}{extra}")
         if spec is not None:
             print(f"  frames: {spec.frames} x {spec.dt:g} s; solver: {spec.solver or 'defaults'}")
             for name, curve in spec.curves.items():

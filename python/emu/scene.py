@@ -161,6 +161,27 @@ class Scene:
         p = self._part(muscle, "muscle")
         return attachments(self.tets, p.tets, {b.name: b.tets for b in self.parts.values() if b.kind == "bone"})
 
+    def joints(self) -> list:
+        """Joints detected from vertices shared by two bones: one shared vertex is
+        a ball joint (``centre``), two a hinge (``axis`` through ``centre``), more
+        a rigid weld. Returns dicts with bones, kind, vertices, centre, axis."""
+        bones = [p for p in self.parts.values() if p.kind == "bone"]
+        verts = {b.name: np.unique(self.tets[b.tets].ravel()) for b in bones}
+        out = []
+        for i, a in enumerate(bones):
+            for b in bones[i + 1:]:
+                shared = np.intersect1d(verts[a.name], verts[b.name])
+                if len(shared) == 0:
+                    continue
+                p = self.points[shared]
+                kind = {1: "ball", 2: "hinge"}.get(len(shared), "weld")
+                axis = None
+                if kind == "hinge":
+                    axis = (p[1] - p[0]) / np.linalg.norm(p[1] - p[0])
+                out.append({"bones": (a.name, b.name), "kind": kind, "vertices": shared,
+                            "centre": p.mean(axis=0), "axis": axis})
+        return out
+
     def split_tendons(self, muscle: str, distance: float, *, name: str | None = None, **tendon_options) -> Part:
         """Move the muscle's tets whose centroid lies within ``distance`` of one of
         its bone attachments into a new tendon part (default name "<muscle>_tendon");
