@@ -115,6 +115,8 @@ angle = [[0.0, 0.0], [1.0, 20.0]]
         x = meshio.read(out / f"frame_{k:04d}.vtu").points
         R, t = emu.pose_about([1, 0, 0], deg, [0, 0, 0.9 * m.length])
         np.testing.assert_allclose(x[bone], m.points[bone] @ R.T + t, atol=1e-9)
+    log = json.loads((out / "log.json").read_text())
+    assert [f["bone_angles_deg"]["distal"] for f in log["frames"]] == pytest.approx([0.0, 10.0, 20.0])
     bad = (tmp_path / "arm.toml").read_text().replace("[bones.distal]", "[bones.belly]")
     (tmp_path / "bad.toml").write_text(bad)
     with pytest.raises(emu.scenefile.SceneFileError, match="no bone named 'belly'"):

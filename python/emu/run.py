@@ -53,7 +53,9 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print) -> di
                 pvd.append((k * spec.dt, name + ".vtu"))
             if faces is not None:
                 write_obj(os.path.join(out, name + ".obj"), sol.positions, faces)
-            log["frames"].append({"frame": k, "time": k * spec.dt, "activation": act, "converged": sol.converged,
+            angles = {name: curve.value(k, k * spec.dt) for name, (_, _, curve) in spec.bones.items()}
+            log["frames"].append({"frame": k, "time": k * spec.dt, "activation": act,
+                                  "bone_angles_deg": angles, "converged": sol.converged,
                                   "status": sol.status, "iterations": sol.iterations,
                                   "cg_iterations": sol.cg_iterations, "energy": sol.energy,
                                   "rel_grad_norm": sol.grad_norm / sol.grad_norm0 if sol.grad_norm0 else 0.0,
