@@ -12,6 +12,19 @@ from emu.meshes import fusiform
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
+def bone_muscle_bone(bone_fraction, r=3):
+    """A straight fusiform muscle between two fixed bones, each the end
+    ``bone_fraction`` of the length. Returns (scene, mesh, tet centroid z)."""
+    m = fusiform(r, tendon_fraction=0.0)
+    s = emu.Scene(m.points, m.tets, warn=False)
+    z = m.points[m.tets].mean(axis=1)[:, 2]
+    lo, hi = bone_fraction * m.length, (1.0 - bone_fraction) * m.length
+    s.add_bone("proximal", z < lo)
+    s.add_bone("distal", z > hi)
+    s.add_muscle("belly", (z >= lo) & (z <= hi))
+    return s, m, z
+
+
 def small_scene(r=2, pin="proximal", tendon_fraction=0.12, **muscle_kw):
     """A fusiform muscle (tendon caps as a stiff tendon part, unless
     tendon_fraction=0) pinned at its proximal end. Returns (scene, mesh)."""

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import emu
+from conftest import bone_muscle_bone
 from emu.fibers import attachments, fiber_angle_degrees, laplace_fibers
 from emu.meshes import fusiform
 
@@ -97,14 +98,8 @@ def test_attachments_lists_shared_vertices():
     np.testing.assert_array_equal(att["b"], expected)
 
 
-def _bone_muscle_bone(r=3):
-    m = fusiform(r, tendon_fraction=0.0)
-    s = emu.Scene(m.points, m.tets, warn=False)
-    c = m.points[m.tets].mean(axis=1)[:, 2]
-    s.add_bone("proximal", c < 0.1 * m.length)
-    s.add_bone("distal", c > 0.9 * m.length)
-    s.add_muscle("belly", (c >= 0.1 * m.length) & (c <= 0.9 * m.length))
-    return s, m, c
+def _bone_muscle_bone():
+    return bone_muscle_bone(0.1)
 
 
 def test_split_tendons_by_distance_from_attachments():

@@ -9,18 +9,13 @@ import numpy as np
 import pytest
 
 import emu
-from emu.meshes import fusiform
+from conftest import bone_muscle_bone
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def _bone_muscle_bone():
-    m = fusiform(3, tendon_fraction=0.0)
-    s = emu.Scene(m.points, m.tets, warn=False)
-    c = m.points[m.tets].mean(axis=1)[:, 2]
-    s.add_bone("proximal", c < 0.15 * m.length)
-    s.add_bone("distal", c > 0.85 * m.length)
-    s.add_muscle("belly", (c >= 0.15 * m.length) & (c <= 0.85 * m.length))
+    s, m, _ = bone_muscle_bone(0.15)
     return s, m
 
 

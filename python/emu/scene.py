@@ -195,10 +195,7 @@ class Scene:
                              "measure from; label the tendon tets yourself (add_tendon)")
         if p.fibers is None and len(att) == 2:
             # fibres run between the bone attachments, which the split hides behind the tendons
-            from .fibers import laplace_fibers
-
-            (_, origin), (_, insertion) = att.items()
-            p.fibers = laplace_fibers(self.points, self.tets[p.tets], origin, insertion)
+            self._fibers_between(p, att)
         anchor = self.points[np.unique(np.concatenate(list(att.values())))]
         c = self.points[self.tets[p.tets]].mean(axis=1)
         near = np.zeros(len(c), bool)
@@ -283,20 +280,23 @@ class Scene:
 
     def resolve_fibers(self):
         """Give every muscle without fibres a Laplace field between its two bone attachments."""
-        from .fibers import attachments, laplace_fibers
-
-        bones = {p.name: p.tets for p in self.parts.values() if p.kind == "bone"}
         for p in self.parts.values():
             if p.kind != "muscle" or p.fibers is not None:
                 continue
-            att = attachments(self.tets, p.tets, bones)
+            att = self.attachments(p.name)
             if len(att) != 2:
                 found = ", ".join(f"{k} ({len(v)} vertices)" for k, v in att.items()) or "none"
                 raise ValueError(f"muscle '{p.name}' has no fibres and {len(att)} bone attachment(s) ({found}); "
                                  "fibres from attachments need exactly two: pass fibers=, or origin= and "
                                  "insertion= vertex ids")
-            (_, origin), (_, insertion) = att.items()
-            p.fibers = laplace_fibers(self.points, self.tets[p.tets], origin, insertion)
+            self._fibers_between(p, att)
+
+    def _fibers_between(self, part: Part, att: dict):
+        """Laplace fibres of a muscle from its first attachment to its second."""
+        from .fibers import laplace_fibers
+
+        (_, origin), (_, insertion) = att.items()
+        part.fibers = laplace_fibers(self.points, self.tets[part.tets], origin, insertion)
 
     def validate(self):
         if not self.parts:

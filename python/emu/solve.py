@@ -156,32 +156,33 @@ class Solver:
         if not isinstance(bone_poses, dict):
             raise TypeError("bone_poses must be a dict {bone name: (R, t)} or {bone name: 4x4 matrix}")
         bones = {p.name: p for p in self.scene.parts.values() if p.kind == "bone"}
-        moved = {}
+        poses = {}
         for name, pose in bone_poses.items():
             if name not in bones:
                 raise ValueError(f"bone_poses: no bone named '{name}' (bones: {', '.join(bones) or 'none'})")
-            R, t = _pose(name, pose)
-            verts = np.unique(self.scene.tets[bones[name].tets].ravel())
-            moved[name] = (verts, self.scene.points[verts] @ R.T + t)
+            poses[name] = _pose(name, pose)
+
+        def placed(name, X):  # where bone `name` puts rest points X
+            if name not in poses:
+                return X
+            R, t = poses[name]
+            return X @ R.T + t
+
         targets = targets.copy()
-        diag = float(np.linalg.norm(self.scene.points.max(0) - self.scene.points.min(0)))
-        where = {}
-        for name, (verts, pos) in moved.items():
-            targets[np.searchsorted(ids, verts)] = pos
-            where[name] = dict(zip(verts.tolist(), pos))
+        for name in poses:
+            verts = np.unique(self.scene.tets[bones[name].tets].ravel())
+            targets[np.searchsorted(ids, verts)] = placed(name, self.scene.points[verts])
         # a vertex shared by two bones (a joint) must land in the same place under both poses
-        names = list(bones)
-        for i, a in enumerate(names):
-            va = np.unique(self.scene.tets[bones[a].tets].ravel())
-            for b in names[i + 1:]:
-                shared = np.intersect1d(va, np.unique(self.scene.tets[bones[b].tets].ravel()))
-                for v in shared:
-                    pa = where.get(a, {}).get(v, self.scene.points[v])
-                    pb = where.get(b, {}).get(v, self.scene.points[v])
-                    if np.linalg.norm(pa - pb) > 1e-9 * diag:
-                        raise ValueError(f"bones '{a}' and '{b}' share vertex {v}, which their poses put "
-                                         f"{np.linalg.norm(pa - pb):.3g} apart; a joint must stay together "
-                                         "(rotate about the joint: the hinge axis or ball centre)")
+        diag = float(np.linalg.norm(self.scene.points.max(0) - self.scene.points.min(0)))
+        for joint in self.scene.joints():
+            a, b = joint["bones"]
+            X = self.scene.points[joint["vertices"]]
+            gap = np.linalg.norm(placed(a, X) - placed(b, X), axis=1)
+            if gap.max() > 1e-9 * diag:
+                v = joint["vertices"][int(np.argmax(gap))]
+                raise ValueError(f"bones '{a}' and '{b}' share vertex {v}, which their poses put "
+                                 f"{gap.max():.3g} apart; a joint must stay together "
+                                 "(rotate about the joint: the hinge axis or ball centre)")
         return targets
 
     def load_case(self, activation=None, normalized=False, gravity=None, pin_positions=None, bone_poses=None):
