@@ -7,6 +7,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <Spectra/SymEigsShiftSolver.h>
+#include <Spectra/SymEigsSolver.h>
 
 namespace emu {
 namespace {
@@ -41,7 +42,58 @@ Eigen::MatrixXd dense_upper_to_full(const cholmod_sparse* A) {
   return K;
 }
 
+class InverseOp {
+ public:
+  using Scalar = double;
+  InverseOp(int n, const LinearOperator& op) : n_(n), op_(op) {}
+  Eigen::Index rows() const { return n_; }
+  Eigen::Index cols() const { return n_; }
+  void perform_op(const double* x, double* y) const { op_(x, y); }
+
+ private:
+  int n_;
+  const LinearOperator& op_;
+};
+
 }  // namespace
+
+Modes lowest_modes_of_inverse(int n, const LinearOperator& apply_inverse, int count, int nullity, double tolerance) {
+  Modes modes;
+  count = std::max(0, std::min(count, n - nullity));
+  if (count == 0) {
+    modes.values.resize(0);
+    modes.vectors.resize(n, 0);
+    return modes;
+  }
+  Eigen::VectorXd mu;
+  Eigen::MatrixXd vecs;
+  if (n <= 400 || 3 * count + 20 > n) {
+    Eigen::MatrixXd M(n, n);
+    Eigen::VectorXd e = Eigen::VectorXd::Zero(n);
+    for (int j = 0; j < n; ++j) {
+      e(j) = 1.0;
+      apply_inverse(e.data(), M.col(j).data());
+      e(j) = 0.0;
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (M + M.transpose()));
+    mu = es.eigenvalues().tail(count).reverse();
+    vecs = es.eigenvectors().rightCols(count).rowwise().reverse();
+  } else {
+    InverseOp op(n, apply_inverse);
+    const int ncv = std::min(n, std::max(2 * count + 1, count + 20));
+    Spectra::SymEigsSolver<InverseOp> eigs(op, count, ncv);
+    eigs.init();
+    eigs.compute(Spectra::SortRule::LargestAlge, 2000, tolerance);
+    if (eigs.info() != Spectra::CompInfo::Successful)
+      throw std::runtime_error("Lanczos did not converge for " + std::to_string(count) + " modes; try fewer modes");
+    mu = eigs.eigenvalues();  // descending
+    vecs = eigs.eigenvectors();
+  }
+  if (!(mu(count - 1) > 0)) throw std::runtime_error("the constrained ACAP matrix is not positive definite");
+  modes.values = mu.cwiseInverse();
+  modes.vectors = vecs;
+  return modes;
+}
 
 Modes lowest_modes(const CholmodFactor& factor, int count, double tolerance) {
   const int n = factor.rows();

@@ -1,5 +1,6 @@
 #include "emu/model/model.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -51,18 +52,74 @@ void Model::validate() const {
     fail("pinned vertex index out of range");
   for (Eigen::Index i = 1; i < pinned.size(); ++i)
     if (pinned(i) <= pinned(i - 1)) fail("pinned vertex ids must be sorted and unique");
+  if (bone.size() != 0 && bone.size() != m) need(bone.size(), "bone");
+  if (bone.size()) {
+    if (bone.minCoeff() < -1 || bone.maxCoeff() >= num_bones) fail("bone index out of range");
+    std::vector<int> count(num_bones, 0);
+    for (Eigen::Index t = 0; t < m; ++t)
+      if (bone(t) >= 0) {
+        ++count[bone(t)];
+        if (muscle(t) >= 0) fail("a tet cannot belong to both a muscle and a bone");
+      }
+    for (int b = 0; b < num_bones; ++b)
+      if (count[b] == 0) fail("movable bone " + std::to_string(b) + " has no tets");
+  } else if (num_bones != 0) {
+    fail("num_bones > 0 but no per-tet bone ids were given");
+  }
   if (pinned.size() == 0)
     fail("the scene is not anchored: pin some vertices (scene.pin) or fix a bone; "
          "otherwise it can move freely and no equilibrium is unique");
 }
 
 Discretization::Discretization(const Model& model) : geometry(tet_geometry(model.rest, model.tets)) {
-  const Eigen::Index n = model.rest.rows();
+  const Eigen::Index n = model.rest.rows(), m = model.tets.rows();
+  num_bones = model.bone.size() ? model.num_bones : 0;
+  std::vector<char> pinned(n, 0);
+  for (Eigen::Index i = 0; i < model.pinned.size(); ++i) pinned[model.pinned(i)] = 1;
+  // Bones of each vertex (sorted, unique).
+  std::vector<std::vector<int>> bones_of(n);
+  for (Eigen::Index t = 0; t < m && num_bones; ++t) {
+    const int b = model.bone(t);
+    if (b < 0) continue;
+    for (int a = 0; a < 4; ++a) {
+      auto& l = bones_of[model.tets(t, a)];
+      if (std::find(l.begin(), l.end(), b) == l.end()) l.insert(std::upper_bound(l.begin(), l.end(), b), b);
+    }
+  }
+  vertex_bone = Eigen::VectorXi::Constant(n, -1);
+  bone_center = Eigen::MatrixX3d::Zero(num_bones, 3);
+  Eigen::VectorXd bone_count = Eigen::VectorXd::Zero(num_bones);
+  for (Eigen::Index v = 0; v < n; ++v) {
+    const auto& l = bones_of[v];
+    for (int b : l) {
+      bone_center.row(b) += model.rest.row(v);
+      bone_count(b) += 1;
+    }
+    if (l.empty()) continue;
+    if (pinned[v]) {
+      for (int b : l) joints.push_back({static_cast<int>(v), b, -1});
+    } else {
+      vertex_bone(v) = l[0];
+      for (size_t i = 1; i < l.size(); ++i) joints.push_back({static_cast<int>(v), l[i], l[0]});
+    }
+  }
+  for (int b = 0; b < num_bones; ++b) bone_center.row(b) /= bone_count(b);
   free_index = Eigen::VectorXi::Zero(n);
-  for (Eigen::Index i = 0; i < model.pinned.size(); ++i) free_index(model.pinned(i)) = -1;
   num_free = 0;
-  for (Eigen::Index v = 0; v < n; ++v)
-    if (free_index(v) >= 0) free_index(v) = num_free++;
+  for (Eigen::Index v = 0; v < n; ++v) free_index(v) = (pinned[v] || vertex_bone(v) >= 0) ? -1 : num_free++;
+  num_soft = 0;
+  owner.resize(m);
+  for (Eigen::Index t = 0; t < m; ++t)
+    if (!num_bones || model.bone(t) < 0) owner(t) = num_soft++;
+  for (Eigen::Index t = 0; t < m; ++t)
+    if (num_bones && model.bone(t) >= 0) owner(t) = num_soft + model.bone(t);
+  num_unknowns = num_soft + num_bones;
+  unknown_ptr.assign(num_unknowns + 1, 0);
+  for (Eigen::Index t = 0; t < m; ++t) ++unknown_ptr[owner(t) + 1];
+  for (int u = 0; u < num_unknowns; ++u) unknown_ptr[u + 1] += unknown_ptr[u];
+  unknown_tets.resize(m);
+  std::vector<int> fill(unknown_ptr.begin(), unknown_ptr.end() - 1);
+  for (Eigen::Index t = 0; t < m; ++t) unknown_tets[fill[owner(t)]++] = static_cast<int>(t);
   lumped_mass = Eigen::VectorXd::Zero(n);
   for (Eigen::Index t = 0; t < model.tets.rows(); ++t)
     for (int a = 0; a < 4; ++a)

@@ -20,7 +20,13 @@ struct Model {
   Eigen::MatrixX3d fiber;       // #T by 3 unit fibre directions (rows of zeros where unused)
   Eigen::VectorXi muscle;       // #T index of the muscle that activates the tet, -1 if none
   Eigen::VectorXi pinned;       // #P pinned vertex ids (sorted, unique)
+  // #T index of the movable (rigid) bone a tet belongs to, -1 for soft tissue;
+  // empty means no movable bones. A movable bone moves rigidly: its vertices
+  // follow one rotation and translation; its tets carry no elastic energy.
+  // Vertices a bone shares with a pinned vertex or another bone are joints.
+  Eigen::VectorXi bone;
   int num_muscles = 0;
+  int num_bones = 0;
 
   /// Throws std::invalid_argument naming the first inconsistency found.
   void validate() const;
@@ -33,12 +39,34 @@ struct LoadCase {
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // acceleration
 };
 
+/// A vertex a movable bone shares with something that also places it: a
+/// pinned vertex (fixed or scripted bone, user pin; other = -1) or another
+/// movable bone (other = that bone, which owns the vertex's position).
+struct JointVertex {
+  int vertex, bone, other;
+};
+
 /// Derived, immutable data shared by the solvers.
 struct Discretization {
   TetGeometry geometry;
-  Eigen::VectorXi free_index;  // #V index among free vertices, -1 if pinned
+  // #V index among free soft vertices (the per-vertex unknowns), -1 for pinned
+  // vertices and for vertices that move with a bone
+  Eigen::VectorXi free_index;
   int num_free = 0;
   Eigen::VectorXd lumped_mass;  // #V
+  // Bones. vertex_bone: #V bone that places the vertex (lowest bone id if it is
+  // shared; -1 for soft and pinned vertices).
+  int num_bones = 0;
+  Eigen::VectorXi vertex_bone;
+  Eigen::MatrixX3d bone_center;        // num_bones by 3 rest centroids of each bone's vertices
+  std::vector<JointVertex> joints;
+  // EMU unknowns: one per soft tet (in tet order), then one per bone.
+  // owner: #T unknown of each tet; unknown_ptr/unknown_tets: the tets of each
+  // unknown (CSR).
+  int num_unknowns = 0, num_soft = 0;
+  Eigen::VectorXi owner;
+  std::vector<int> unknown_ptr, unknown_tets;
+  bool is_bone_tet(Eigen::Index t) const { return owner(t) >= num_soft; }
   explicit Discretization(const Model& model);
 };
 

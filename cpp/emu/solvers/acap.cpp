@@ -1,6 +1,10 @@
 #include "emu/solvers/acap.h"
 
 #include <stdexcept>
+#include <string>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
 
 namespace emu {
 
@@ -12,9 +16,40 @@ void deformation_gradients(const Discretization& disc, const Eigen::MatrixX4i& T
   for (Eigen::Index t = 0; t < m; ++t) out.col(t) = flatten(deformation_gradient(disc.geometry.grad[t], x, T, t));
 }
 
+void expand_unknowns(const Discretization& disc, const Mat9X& U, Mat9X& out) {
+  const Eigen::Index m = disc.owner.size();
+  out.resize(9, m);
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index t = 0; t < m; ++t) out.col(t) = U.col(disc.owner(t));
+}
+
+void reduce_to_unknowns(const Discretization& disc, const Mat9X& per_tet, Mat9X& out) {
+  const long nu = disc.num_unknowns;
+  out.resize(9, nu);
+#pragma omp parallel for schedule(dynamic, 256)
+  for (long u = 0; u < nu; ++u) {
+    Vec9 s = Vec9::Zero();
+    for (int i = disc.unknown_ptr[u]; i < disc.unknown_ptr[u + 1]; ++i) s += per_tet.col(disc.unknown_tets[i]);
+    out.col(u) = s;
+  }
+}
+
+namespace {
+Eigen::Vector4d phi_of(const Model& model, const Discretization& disc, int v, int b) {
+  Eigen::Vector4d p;
+  p.head<3>() = (model.rest.row(v) - disc.bone_center.row(b)).transpose();
+  p(3) = 1.0;
+  return p;
+}
+}  // namespace
+
 AcapOperator::AcapOperator(const Model& model, const Discretization& disc)
     : model_(model), disc_(disc), pattern_(model.tets, disc.free_index, disc.num_free, 1) {
   const Eigen::Index m = model.tets.rows();
+  ns_ = disc.num_free;
+  nq_ = 4 * disc.num_bones;
+  if (ns_ == 0)
+    throw std::invalid_argument("the model has no free soft vertex: every vertex is pinned or on a bone");
   wv_ = model.acap_weight.cwiseProduct(disc.geometry.volume);
   std::vector<double> element(m * 16);
 #pragma omp parallel for schedule(static)
@@ -27,12 +62,111 @@ AcapOperator::AcapOperator(const Model& model, const Discretization& disc)
   factor_.analyze(pattern_.rows(), pattern_.col_ptr().data(), pattern_.row_index().data());
   if (!factor_.factorize(values.data()))
     throw std::invalid_argument(
-        "the ACAP matrix is singular: some part of the mesh is not connected to a pinned vertex "
-        "or fixed bone; pin a vertex of every connected component");
+        "the ACAP matrix is singular: some part of the mesh is not connected to a pinned vertex, "
+        "fixed bone or movable bone; pin a vertex of every connected component");
   corner_.resize(m * 12);
-  rhs_rows_.resize(disc.num_free, 3);
-  rhs_.resize(disc.num_free, 3);
-  sol_.resize(disc.num_free, 3);
+  rhs_rows_.resize(ns_, 3);
+  if (nq_) setup_bones();
+}
+
+void AcapOperator::setup_bones() {
+  const Eigen::Index m = model_.tets.rows();
+  const auto& vb = disc_.vertex_bone;
+  for (Eigen::Index t = 0; t < m; ++t)
+    for (int a = 0; a < 4; ++a) {
+      const int v = model_.tets(t, a);
+      if (vb(v) < 0) continue;
+      bone_corner_.push_back(static_cast<int>(t * 4 + a));
+      bone_corner_bone_.push_back(vb(v));
+    }
+  bone_corner_phi_.resize(4, bone_corner_.size());
+  for (size_t i = 0; i < bone_corner_.size(); ++i)
+    bone_corner_phi_.col(i) = phi_of(model_, disc_, model_.tets(bone_corner_[i] / 4, bone_corner_[i] % 4),
+                                     bone_corner_bone_[i]);
+  // Coupling L_sb and bone block L_bb from the element matrices w V b_a . b_c.
+  Eigen::MatrixXd Lsb = Eigen::MatrixXd::Zero(ns_, nq_), Lbb = Eigen::MatrixXd::Zero(nq_, nq_);
+  for (Eigen::Index t = 0; t < m; ++t) {
+    bool touches = false;
+    for (int a = 0; a < 4; ++a) touches |= vb(model_.tets(t, a)) >= 0;
+    if (!touches) continue;
+    const ShapeGrads& b = disc_.geometry.grad[t];
+    for (int a = 0; a < 4; ++a) {
+      const int va = model_.tets(t, a);
+      for (int c = 0; c < 4; ++c) {
+        const int vc = model_.tets(t, c);
+        if (vb(vc) < 0) continue;
+        const double e = wv_(t) * b.row(a).dot(b.row(c));
+        const Eigen::Vector4d pc = phi_of(model_, disc_, vc, vb(vc));
+        if (disc_.free_index(va) >= 0) {
+          Lsb.block<1, 4>(disc_.free_index(va), 4 * vb(vc)) += e * pc.transpose();
+        } else if (vb(va) >= 0) {
+          Lbb.block<4, 4>(4 * vb(va), 4 * vb(vc)) += e * phi_of(model_, disc_, va, vb(va)) * pc.transpose();
+        }
+      }
+    }
+  }
+  W_.resize(ns_, nq_);
+  factor_.solve(Lsb.data(), W_.data(), nq_);
+  Sb_ = Lbb - Lsb.transpose() * W_;
+  Sb_ = 0.5 * (Sb_ + Sb_.transpose()).eval();
+  // Joint rows.
+  const int nj = static_cast<int>(disc_.joints.size());
+  J_ = Eigen::MatrixXd::Zero(nj, nq_);
+  for (int r = 0; r < nj; ++r) {
+    const JointVertex& j = disc_.joints[r];
+    J_.block<1, 4>(r, 4 * j.bone) += phi_of(model_, disc_, j.vertex, j.bone).transpose();
+    if (j.other >= 0) J_.block<1, 4>(r, 4 * j.other) -= phi_of(model_, disc_, j.vertex, j.other).transpose();
+  }
+  Eigen::MatrixXd V;
+  rank_ = 0;
+  if (nj) {
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(J_, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    const Eigen::VectorXd& s = svd.singularValues();
+    while (rank_ < s.size() && s(rank_) > 1e-9 * s(0)) ++rank_;
+    V = svd.matrixV();
+    Jpinv_ = V.leftCols(rank_) * s.head(rank_).cwiseInverse().asDiagonal() *
+             svd.matrixU().leftCols(rank_).transpose();
+  } else {
+    V = Eigen::MatrixXd::Identity(nq_, nq_);
+    Jpinv_.resize(nq_, 0);
+  }
+  N_ = V.rightCols(nq_ - rank_);
+  const Eigen::MatrixXd red = N_.transpose() * Sb_ * N_;
+  if (red.rows()) {
+    const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(red).eigenvalues();
+    if (!(ev(0) > 1e-12 * ev(ev.size() - 1)))
+      throw std::invalid_argument(
+          "a movable bone cannot be placed: it is connected to no pinned vertex, fixed bone or soft "
+          "tissue that fixes its position; attach it (a joint or a muscle) or fix it");
+  }
+  reduced_.compute(red);
+}
+
+Eigen::MatrixX3d AcapOperator::joint_targets(const Eigen::MatrixX3d& x) const {
+  Eigen::MatrixX3d h = Eigen::MatrixX3d::Zero(disc_.joints.size(), 3);
+  for (size_t r = 0; r < disc_.joints.size(); ++r)
+    if (disc_.joints[r].other < 0) h.row(r) = x.row(disc_.joints[r].vertex);
+  return h;
+}
+
+void AcapOperator::solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h, Eigen::MatrixXd& Z) const {
+  const int nc = static_cast<int>(R.cols());
+  Z.resize(dofs(), nc);
+  Eigen::MatrixXd y0(ns_, nc);
+  Eigen::MatrixXd Rs = R.topRows(ns_);
+  factor_.solve(Rs.data(), y0.data(), nc);
+  if (!nq_) {
+    Z = y0;
+    return;
+  }
+  // Bone problem in the null space of J: q = q_p + N w,
+  // (N^T S_b N) w = N^T (r_b - W^T r_s - S_b q_p).
+  const Eigen::MatrixXd rb = R.bottomRows(nq_) - W_.transpose() * Rs;
+  Eigen::MatrixXd q = Eigen::MatrixXd::Zero(nq_, nc);
+  if (h && rank_) q = Jpinv_ * (*h);
+  if (N_.cols()) q += N_ * reduced_.solve(N_.transpose() * (rb - Sb_ * q));
+  Z.topRows(ns_) = y0 - W_ * q;
+  Z.bottomRows(nq_) = q;
 }
 
 namespace {
@@ -48,44 +182,71 @@ void corner_targets(const Eigen::VectorXd& wv, const Discretization& disc, Targe
 }
 }  // namespace
 
-void AcapOperator::fit(const Mat9X& F, const Mat9X* F_pinned, Eigen::MatrixX3d& x) const {
-  // Normal equations over the free vertices a:
-  //   sum_b L_ab x_b = sum_t w_t V_t (F_t - F_t(x_pinned)) b_a
-  corner_targets(wv_, disc_, [&](Eigen::Index t) {
-    Mat3 T = unflatten(F.col(t));
-    if (F_pinned) T -= unflatten(F_pinned->col(t));
-    return T;
-  }, corner_.data());
-  pattern_.gather(corner_.data(), 3, rhs_rows_.data());
-  rhs_ = rhs_rows_;
-  solve(rhs_, sol_);
-  scatter_free(sol_, x);
-}
-
-void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& y) const {
+void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const {
   corner_targets(wv_, disc_, [&](Eigen::Index t) { return Mat3(unflatten(D.col(t))); }, corner_.data());
   pattern_.gather(corner_.data(), 3, rhs_rows_.data());
-  y = rhs_rows_;
+  R.resize(dofs(), 3);
+  R.topRows(ns_) = rhs_rows_;
+  if (!nq_) return;
+  R.bottomRows(nq_).setZero();
+  for (size_t i = 0; i < bone_corner_.size(); ++i)  // fixed order: reproducible
+    R.block<4, 3>(ns_ + 4 * bone_corner_bone_[i], 0).noalias() +=
+        bone_corner_phi_.col(i) * Eigen::Map<const Vec3>(corner_.data() + 3 * bone_corner_[i]).transpose();
 }
 
-void AcapOperator::apply_CT(const Eigen::MatrixX3d& u, Mat9X& out) const {
-  const Eigen::Index m = model_.tets.rows();
-  out.resize(9, m);
+void AcapOperator::fit(const Mat9X& F, const Mat9X* F_pinned, const Eigen::MatrixX3d* h, Eigen::MatrixX3d& x) const {
+  // Normal equations: K z = C (F - F_t(x_pinned)), J q = h.
+  Mat9X target = F;
+  if (F_pinned) target -= *F_pinned;
+  Eigen::MatrixX3d R;
+  apply_C(target, R);
+  Eigen::MatrixXd Z, hd;
+  if (h) hd = *h;
+  solve_with(R, h ? &hd : nullptr, Z);
+  expand(Eigen::MatrixX3d(Z), x);
+}
+
+template <class M>
+static void expand_impl(const Model& model, const Discretization& disc, int ns, const M& Z, M& x) {
+  const Eigen::Index n = x.rows();
+  const int nc = static_cast<int>(Z.cols());
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t) {
-    const ShapeGrads& b = disc_.geometry.grad[t];
-    Mat3 F = Mat3::Zero();
-    for (int a = 0; a < 4; ++a) {
-      const int v = disc_.free_index(model_.tets(t, a));
-      if (v >= 0) F.noalias() += u.row(v).transpose() * b.row(a);
+  for (Eigen::Index v = 0; v < n; ++v) {
+    if (disc.free_index(v) >= 0) {
+      x.row(v) = Z.row(disc.free_index(v));
+    } else if (disc.vertex_bone(v) >= 0) {
+      const int b = disc.vertex_bone(v);
+      x.row(v) = phi_of(model, disc, static_cast<int>(v), b).transpose() * Z.block(ns + 4 * b, 0, 4, nc);
     }
-    out.col(t) = wv_(t) * flatten(F);
   }
 }
 
-void AcapOperator::scatter_free(const Eigen::MatrixX3d& y, Eigen::MatrixX3d& x) const {
-  for (Eigen::Index v = 0; v < x.rows(); ++v)
-    if (disc_.free_index(v) >= 0) x.row(v) = y.row(disc_.free_index(v));
+void AcapOperator::expand(const Eigen::MatrixXd& Z, Eigen::MatrixXd& x) const {
+  expand_impl(model_, disc_, ns_, Z, x);
+}
+void AcapOperator::expand(const Eigen::MatrixX3d& Z, Eigen::MatrixX3d& x) const {
+  expand_impl(model_, disc_, ns_, Z, x);
+}
+
+void AcapOperator::apply_CT(const Eigen::MatrixX3d& u, Mat9X& out) const {
+  Eigen::MatrixX3d x = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
+  expand(u, x);
+  deformation_gradients(disc_, model_.tets, x, out);
+  const Eigen::Index m = model_.tets.rows();
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index t = 0; t < m; ++t) out.col(t) *= wv_(t);
+}
+
+void AcapOperator::reduce_vertex(const Eigen::MatrixX3d& f, Eigen::MatrixX3d& R) const {
+  R = Eigen::MatrixX3d::Zero(dofs(), 3);
+  for (Eigen::Index v = 0; v < f.rows(); ++v) {
+    if (disc_.free_index(v) >= 0) {
+      R.row(disc_.free_index(v)) = f.row(v);
+    } else if (disc_.vertex_bone(v) >= 0) {
+      const int b = disc_.vertex_bone(v);
+      R.block<4, 3>(ns_ + 4 * b, 0).noalias() += phi_of(model_, disc_, static_cast<int>(v), b) * f.row(v);
+    }
+  }
 }
 
 }  // namespace emu

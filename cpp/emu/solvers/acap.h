@@ -1,15 +1,28 @@
 #pragma once
 // The ACAP fit x*(F): the positions whose per-tet deformation gradients best
-// match the unknowns F in the weighted least-squares sense,
-//   E_C(x, F) = alpha/2 sum_t w_t V_t |F_t(x) - F_t|^2.
-// Its matrix K = sum_t w_t V_t G_t^T G_t does not depend on F. Because every
-// constraint here acts on whole vertices (pins; later bones' affine maps and
-// joints act per coordinate too), K = L (x) I_3 with L the scalar weighted
-// Laplacian L_ab = sum_t w_t V_t b_a . b_b over the free vertices: only L is
-// factorised (once), and every fit is one back-substitution with 3 right-hand
-// sides. alpha cancels from the fit; it enters the energy only.
+// match the targets F in the weighted least-squares sense,
+//   E_C(x, F) = alpha/2 sum_t w_t V_t |F_t(x) - F_own(t)|^2,
+// over the position unknowns z, per coordinate:
+//   - one scalar per free soft vertex (y), and
+//   - four per movable bone (q_b): a bone vertex sits at x_v = A_b (X_v - Xbar_b) + c_b,
+//     so per coordinate x_v[c] = phi_v . q_b[c] with phi_v = (X_v - Xbar_b, 1);
+// subject to the joint rows J q = h (a bone vertex that is pinned must sit at
+// its target; one shared by two bones must agree). Pins, bone maps and joints
+// all act on whole vertices, so the matrix is K = L (x) I_3 with the scalar
+// L = S^T L_vertex S: each fit is a solve with 3 right-hand sides.
+//
+// L is bordered: the soft block L_ss (sparse, CHOLMOD, factorised once), the
+// bone block L_bb (4 #bones, dense) and the coupling L_sb. With
+// W = L_ss^-1 L_sb and the bone Schur complement S_b = L_bb - L_sb^T W (both
+// formed once), a fit is
+//   y0 = L_ss^-1 r_s,   min_q 1/2 q^T S_b q - q^T (r_b - W^T r_s)  s.t.  J q = h,
+//   y = y0 - W q,
+// one back-substitution plus small dense work: the constant-matrix property is
+// kept. The bone problem is solved in the null space of J (SVD once), which
+// also drops redundant joint rows. alpha cancels from the fit.
 #include <vector>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 
 #include "emu/linalg/cholmod_factor.h"
@@ -24,42 +37,72 @@ using Mat9X = Eigen::Matrix<double, 9, Eigen::Dynamic>;
 void deformation_gradients(const Discretization& disc, const Eigen::MatrixX4i& T,
                            const Eigen::MatrixX3d& x, Mat9X& out);
 
+/// Per-tet copies of the EMU unknowns: out.col(t) = U.col(owner(t)). U: 9 x #unknowns.
+void expand_unknowns(const Discretization& disc, const Mat9X& U, Mat9X& out);
+/// Sums of per-tet columns into their unknowns (fixed order). per_tet: 9 x #T.
+void reduce_to_unknowns(const Discretization& disc, const Mat9X& per_tet, Mat9X& out);
+
 class AcapOperator {
  public:
   AcapOperator(const Model& model, const Discretization& disc);
 
-  /// Writes the free rows of x (#V by 3) with the fit to targets F (9 x #T).
-  /// F_pinned (9 x #T) is F_t of the positions with free rows zero and pinned
-  /// rows at their targets: the pinned vertices' share of every F_t(x).
-  void fit(const Mat9X& F, const Mat9X* F_pinned, Eigen::MatrixX3d& x) const;
+  /// Number of scalar position unknowns per coordinate: num_free + 4 #bones.
+  int dofs() const { return ns_ + nq_; }
+  bool has_bones() const { return nq_ > 0; }
+  int constraint_rank() const { return rank_; }
 
-  /// y = L^-1 b for the free rows: b, y are num_free by 3 (column-major).
-  void solve(const Eigen::MatrixX3d& b, Eigen::MatrixX3d& y) const { factor_.solve(b.data(), y.data(), 3); }
+  /// Writes every non-pinned row of x (#V by 3) with the fit to per-tet targets
+  /// F (9 x #T). F_pinned (9 x #T): F_t of the positions with only the pinned
+  /// rows set (their share of every F_t(x)). h: joint targets (see
+  /// joint_targets), nullptr for homogeneous joints (a displacement fit).
+  void fit(const Mat9X& F, const Mat9X* F_pinned, const Eigen::MatrixX3d* h, Eigen::MatrixX3d& x) const;
 
-  /// y = C D: the right-hand side sum_t w_t V_t D_t b_a per free vertex a
-  /// (num_free by 3) for per-tet matrices D (9 x #T).
-  void apply_C(const Mat9X& D, Eigen::MatrixX3d& y) const;
+  /// Joint targets h (#joint rows by 3) of positions x (#V by 3) whose pinned rows are set.
+  Eigen::MatrixX3d joint_targets(const Eigen::MatrixX3d& x) const;
 
-  /// out_t = w_t V_t F_t(u) (= C^T u) for a displacement u of the free vertices
-  /// (num_free by 3; pinned vertices do not move).
+  /// Z = K_c^-1 R with homogeneous joints: R, Z are dofs() by ncols (any ncols).
+  void solve(const Eigen::MatrixXd& R, Eigen::MatrixXd& Z) const { solve_with(R, nullptr, Z); }
+
+  /// R = C D = S^T sum_t w_t V_t D_t b_a (dofs() by 3) for per-tet matrices D (9 x #T).
+  void apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const;
+
+  /// out_t = w_t V_t F_t(S u) (= C^T u) for position unknowns u (dofs() by 3).
   void apply_CT(const Eigen::MatrixX3d& u, Mat9X& out) const;
 
-  /// Writes the free rows of x from a num_free by 3 block.
-  void scatter_free(const Eigen::MatrixX3d& y, Eigen::MatrixX3d& x) const;
+  /// R = S^T f: forces per vertex (#V by 3) to the position unknowns (dofs() by 3).
+  void reduce_vertex(const Eigen::MatrixX3d& f, Eigen::MatrixX3d& R) const;
 
+  /// Writes the non-pinned rows of x (#V by ncols) from position unknowns Z (dofs() by ncols).
+  void expand(const Eigen::MatrixXd& Z, Eigen::MatrixXd& x) const;
+  void expand(const Eigen::MatrixX3d& Z, Eigen::MatrixX3d& x) const;
+
+  /// The scalar soft-block factor (L_ss).
   const CholmodFactor& factor() const { return factor_; }
   /// w_t V_t per tet.
   const Eigen::VectorXd& weight_volume() const { return wv_; }
 
  private:
+  void solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h, Eigen::MatrixXd& Z) const;
+  void setup_bones();
+
   const Model& model_;
   const Discretization& disc_;
   BlockPattern pattern_;
   CholmodFactor factor_;
   Eigen::VectorXd wv_;
+  int ns_ = 0, nq_ = 0, rank_ = 0;
+  // Bones: corners whose vertex moves with a bone (t * 4 + a, in fixed order)
+  // and the vertex's phi; the coupling and the bone problem.
+  std::vector<int> bone_corner_, bone_corner_bone_;
+  Eigen::Matrix<double, 4, Eigen::Dynamic> bone_corner_phi_;
+  Eigen::MatrixXd W_;            // num_free x nq: L_ss^-1 L_sb
+  Eigen::MatrixXd Sb_;           // nq x nq bone Schur complement
+  Eigen::MatrixXd J_;            // #joint rows x nq
+  Eigen::MatrixXd Jpinv_;        // nq x #joint rows: particular solution q_p = Jpinv h
+  Eigen::MatrixXd N_;            // nq x (nq - rank): null space of J
+  Eigen::LLT<Eigen::MatrixXd> reduced_;  // N^T S_b N
   mutable std::vector<double> corner_;
   mutable Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> rhs_rows_;
-  mutable Eigen::MatrixX3d rhs_, sol_;
 };
 
 }  // namespace emu

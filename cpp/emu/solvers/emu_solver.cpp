@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <Eigen/SVD>
+
 #include "emu/energy/material.h"
 
 namespace emu {
@@ -11,12 +13,21 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
+
+// Nearest rotation (polar decomposition) of a 3x3 matrix near a rotation.
+Mat3 nearest_rotation(const Mat3& M) {
+  Eigen::JacobiSVD<Mat3> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 U = svd.matrixU();
+  if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) *= -1.0;
+  return U * svd.matrixV().transpose();
+}
 }  // namespace
 
 struct EmuSolver::Context {
   Eigen::VectorXd act;         // #T activation
-  Eigen::MatrixX3d x_pinned;   // #V by 3: pinned rows at targets, free rows zero
+  Eigen::MatrixX3d x_pinned;   // #V by 3: pinned rows at targets, other rows zero
   Mat9X F_pinned;              // F_t(x_pinned)
+  Eigen::MatrixX3d h;          // joint targets
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
   bool has_gravity = false;
   Mat9X F_gravity;             // F_t(L^-1 f): the load's share of the gradient
@@ -26,6 +37,9 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
     : model_((model.validate(), model)), disc_(model_), options_(options), emu_(emu_options) {
   if (!(emu_.alpha > 0) || !std::isfinite(emu_.alpha)) throw std::invalid_argument("alpha must be positive and finite");
   if (emu_.modes < 0) throw std::invalid_argument("the number of modes must be >= 0");
+  if (disc_.num_bones && emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur)
+    throw std::invalid_argument("the Schur-complement preconditioner does not handle movable bones; "
+                                "use preconditioner='woodbury'");
   auto t0 = Clock::now();
   acap_ = std::make_unique<AcapOperator>(model_, disc_);
   factor_seconds_ = seconds_since(t0);
@@ -33,8 +47,18 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   // Modes only where the Woodbury approximation is used (section 7: leave out
   // what the solve does not need).
   const bool schur = emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur;
-  const int ks = schur ? 0 : std::min((emu_.modes + 2) / 3, disc_.num_free);
-  const Modes modes = lowest_modes(acap_->factor(), ks);
+  const int ks = schur ? 0 : (emu_.modes + 2) / 3;
+  const Modes modes =
+      acap_->has_bones()
+          ? lowest_modes_of_inverse(acap_->dofs(),
+                                    [&](const double* in, double* out) {
+                                      Eigen::MatrixXd R = Eigen::Map<const Eigen::VectorXd>(in, acap_->dofs());
+                                      Eigen::MatrixXd Z;
+                                      acap_->solve(R, Z);
+                                      Eigen::Map<Eigen::VectorXd>(out, acap_->dofs()) = Z.col(0);
+                                    },
+                                    ks, acap_->constraint_rank())
+          : lowest_modes(acap_->factor(), std::min(ks, disc_.num_free));
   modes_seconds_ = seconds_since(t0);
   woodbury_ = std::make_unique<Woodbury>(model_, disc_, *acap_, modes, emu_.alpha);
   if (schur) {
@@ -50,33 +74,71 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   Context c;
   c.act = tet_activation(model_, load);
   c.x_pinned = pinned_positions(model_, load);
+  Eigen::MatrixX3d f = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
   for (Eigen::Index v = 0; v < c.x_pinned.rows(); ++v)
-    if (disc_.free_index(v) >= 0) c.x_pinned.row(v).setZero();
+    if (disc_.free_index(v) >= 0 || disc_.vertex_bone(v) >= 0) {
+      c.x_pinned.row(v).setZero();
+      f.row(v) = disc_.lumped_mass(v) * load.gravity.transpose();
+    }
   deformation_gradients(disc_, model_.tets, c.x_pinned, c.F_pinned);
+  c.h = acap_->joint_targets(pinned_positions(model_, load));
   c.gravity = load.gravity;
   c.has_gravity = load.gravity.squaredNorm() > 0;
   if (c.has_gravity) {
-    Eigen::MatrixX3d f(disc_.num_free, 3), y(disc_.num_free, 3);
-    for (Eigen::Index v = 0; v < model_.rest.rows(); ++v)
-      if (disc_.free_index(v) >= 0) f.row(disc_.free_index(v)) = disc_.lumped_mass(v) * load.gravity.transpose();
-    acap_->solve(f, y);
+    // d W(x*(F)) / dF = C^T K_c^-1 S^T f: one constant solve per load.
+    Eigen::MatrixX3d R;
+    acap_->reduce_vertex(f, R);
+    Eigen::MatrixXd Z;
+    acap_->solve(Eigen::MatrixXd(R), Z);
     Eigen::MatrixX3d yfull = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
-    acap_->scatter_free(y, yfull);
+    acap_->expand(Eigen::MatrixX3d(Z), yfull);
     deformation_gradients(disc_, model_.tets, yfull, c.F_gravity);
   }
   return c;
 }
 
 void EmuSolver::fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const {
+  Mat9X Ft;
+  expand_unknowns(disc_, F, Ft);
   x = c.x_pinned;
-  acap_->fit(F, &c.F_pinned, x);
+  acap_->fit(Ft, &c.F_pinned, &c.h, x);
   deformation_gradients(disc_, model_.tets, x, Fx);
 }
 
 void EmuSolver::fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const {
+  Mat9X Dt;
+  expand_unknowns(disc_, D, Dt);
   dx.setZero(model_.rest.rows(), 3);
-  acap_->fit(D, nullptr, dx);
+  acap_->fit(Dt, nullptr, nullptr, dx);
   deformation_gradients(disc_, model_.tets, dx, Fd);
+}
+
+void EmuSolver::project_tangent(const Mat9X& F, Mat9X& v) const {
+  for (int u = disc_.num_soft; u < disc_.num_unknowns; ++u) {
+    const Mat3 R = unflatten(F.col(u));
+    const Mat3 K = R.transpose() * unflatten(v.col(u));
+    v.col(u) = flatten(Mat3(R * (0.5 * (K - K.transpose()))));
+  }
+}
+
+void EmuSolver::retract(const Mat9X& F, const Mat9X& d, double s, Mat9X& out) const {
+  out = F + s * d;
+  for (int u = disc_.num_soft; u < disc_.num_unknowns; ++u) out.col(u) = flatten(nearest_rotation(unflatten(out.col(u))));
+}
+
+void EmuSolver::riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
+                                   bool curvature, Mat9X& out) const {
+  hessian_product_into(A, v, out);
+  for (int u = disc_.num_soft; u < disc_.num_unknowns; ++u) {
+    const Mat3 R = unflatten(F.col(u));
+    Mat3 M = unflatten(out.col(u));
+    if (curvature) {
+      const Mat3 RtG = R.transpose() * unflatten(g.col(u));
+      M -= unflatten(v.col(u)) * (0.5 * (RtG + RtG.transpose()));
+    }
+    const Mat3 K = R.transpose() * M;
+    out.col(u) = flatten(Mat3(R * (0.5 * (K - K.transpose()))));
+  }
 }
 
 double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
@@ -86,13 +148,19 @@ double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx
   const auto& wv = acap_->weight_volume();
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
-    Vec9 f = F.col(t), fx = Fx.col(t);
+    const int u = disc_.owner(t);
+    Vec9 f = F.col(u), fx = Fx.col(t);
     if (D) {
-      f += s * D->col(t);
+      f += s * D->col(u);
       fx += s * Fd->col(t);
     }
-    const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
-    tet_energy_[t] = V(t) * material_energy(mat, unflatten(f)) + 0.5 * emu_.alpha * wv(t) * (fx - f).squaredNorm();
+    // Bones are rigid: no elastic energy on rotations.
+    double e = 0.0;
+    if (!disc_.is_bone_tet(t)) {
+      const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
+      e = V(t) * material_energy(mat, unflatten(f));
+    }
+    tet_energy_[t] = e + 0.5 * emu_.alpha * wv(t) * (fx - f).squaredNorm();
   }
   double E = 0;
   for (Eigen::Index t = 0; t < m; ++t) E += tet_energy_[t];
@@ -103,38 +171,52 @@ void EmuSolver::gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx,
   const Eigen::Index m = model_.tets.rows();
   const auto& V = disc_.geometry.volume;
   const auto& wv = acap_->weight_volume();
-  g.resize(9, m);
+  Mat9X per_tet(9, m);
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
-    const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
-    Vec9 gt = V(t) * flatten(material_stress(mat, unflatten(F.col(t)))) + emu_.alpha * wv(t) * (F.col(t) - Fx.col(t));
+    const auto Fu = F.col(disc_.owner(t));
+    Vec9 gt = emu_.alpha * wv(t) * (Fu - Fx.col(t));
+    if (!disc_.is_bone_tet(t)) {
+      const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
+      gt += V(t) * flatten(material_stress(mat, unflatten(Fu)));
+    }
     if (c.has_gravity) gt -= wv(t) * c.F_gravity.col(t);
-    g.col(t) = gt;
+    per_tet.col(t) = gt;
   }
+  reduce_to_unknowns(disc_, per_tet, g);
 }
 
 void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>* A,
                             std::vector<Mat9>* A_exact) const {
-  // A_t = V_t d2Psi/dF2 + alpha w_t V_t I: PSD-filtered (A) and/or unfiltered (A_exact).
+  // A_t = V_t d2Psi/dF2 + alpha w_t V_t I: PSD-filtered (A) and/or unfiltered
+  // (A_exact); a bone's block is alpha sum_t w_t V_t I (rigid: no material).
   const EigenFilter filter = options_.eigen_filter == 1 ? EigenFilter::Abs : EigenFilter::Clamp;
-  const Eigen::Index m = model_.tets.rows();
+  const int nu = disc_.num_unknowns, ns = disc_.num_soft;
   const auto& V = disc_.geometry.volume;
   const auto& wv = acap_->weight_volume();
-  if (A) A->resize(m);
-  if (A_exact) A_exact->resize(m);
+  if (A) A->resize(nu);
+  if (A_exact) A_exact->resize(nu);
+  for (int u = ns; u < nu; ++u) {
+    double w = 0;
+    for (int i = disc_.unknown_ptr[u]; i < disc_.unknown_ptr[u + 1]; ++i) w += wv(disc_.unknown_tets[i]);
+    const Mat9 Ab = emu_.alpha * w * Mat9::Identity();
+    if (A) (*A)[u] = Ab;
+    if (A_exact) (*A_exact)[u] = Ab;
+  }
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t) {
+  for (int u = 0; u < ns; ++u) {
+    const int t = disc_.unknown_tets[u];
     const Mat3 Ft = unflatten(F.col(t));
     const Mat9 H = snh::hessian(Ft, model_.mu(t), model_.lambda(t));
     Mat9 fib = Mat9::Zero();
     if (c.act(t) != 0.0) fib = fiber::hessian(model_.fiber.row(t).transpose(), c.act(t));
     if (A) {
-      (*A)[t] = V(t) * (psd_project<9>(H, filter) + fib);
-      (*A)[t].diagonal().array() += emu_.alpha * wv(t);
+      (*A)[u] = V(t) * (psd_project<9>(H, filter) + fib);
+      (*A)[u].diagonal().array() += emu_.alpha * wv(t);
     }
     if (A_exact) {
-      (*A_exact)[t] = V(t) * (H + fib);
-      (*A_exact)[t].diagonal().array() += emu_.alpha * wv(t);
+      (*A_exact)[u] = V(t) * (H + fib);
+      (*A_exact)[u].diagonal().array() += emu_.alpha * wv(t);
     }
   }
 }
@@ -147,14 +229,18 @@ void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v,
   fit_linear_into(v, dx, Fd);
   const auto& wv = acap_->weight_volume();
   const Eigen::Index m = model_.tets.rows();
-  out.resize(9, m);
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t) out.col(t) = A[t] * v.col(t) - emu_.alpha * wv(t) * Fd.col(t);
+  for (Eigen::Index t = 0; t < m; ++t) Fd.col(t) *= emu_.alpha * wv(t);
+  reduce_to_unknowns(disc_, Fd, out);
+  const long nu = disc_.num_unknowns;
+#pragma omp parallel for schedule(static)
+  for (long u = 0; u < nu; ++u) out.col(u) = A[u] * v.col(u) - out.col(u);
 }
 
 Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
-  if (rows.rows() != model_.tets.rows() || rows.cols() != 9)
-    throw std::invalid_argument("expected a #T by 9 array (one vec(F) per tet), got " +
+  if (rows.rows() != disc_.num_unknowns || rows.cols() != 9)
+    throw std::invalid_argument("expected a #unknowns by 9 array (one vec(F) per soft tet, then per bone; " +
+                                std::to_string(disc_.num_unknowns) + " rows), got " +
                                 std::to_string(rows.rows()) + " by " + std::to_string(rows.cols()));
   if (!rows.allFinite()) throw std::invalid_argument("deformation gradients contain NaN or infinite values");
   return rows.transpose();
@@ -225,24 +311,40 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   const auto t0 = Clock::now();
   const Context c = make_context(load);
   const Eigen::Index m = model_.tets.rows();
-  Mat9X F(9, m);
+  const int nu = disc_.num_unknowns;
+  Mat9X F(9, nu);
   if (F0) {
-    F = to_cols(*F0);
+    if (F0->rows() != m || F0->cols() != 9)
+      throw std::invalid_argument("the start F must be #T by 9 (one vec(F) per tet), got " +
+                                  std::to_string(F0->rows()) + " by " + std::to_string(F0->cols()));
+    if (!F0->allFinite()) throw std::invalid_argument("the start F contains NaN or infinite values");
+    for (int u = 0; u < nu; ++u) F.col(u) = F0->row(disc_.unknown_tets[disc_.unknown_ptr[u]]).transpose();
+    for (int u = disc_.num_soft; u < nu; ++u) F.col(u) = flatten(nearest_rotation(unflatten(F.col(u))));
   } else {
-    for (Eigen::Index t = 0; t < m; ++t) F.col(t) = flatten(Mat3::Identity());
+    for (int u = 0; u < nu; ++u) F.col(u) = flatten(Mat3::Identity());
   }
+  const bool bones = disc_.num_bones > 0;
   const auto& M = disc_.lumped_mass;
   auto work = [&](const Eigen::MatrixX3d& x) {
     return c.has_gravity ? (M.transpose() * x).dot(c.gravity.transpose()) : 0.0;
   };
   Eigen::MatrixX3d x, dx;
-  Mat9X Fx, Fd, g, d, r, z, p, Hp;
+  Mat9X Fx, Fd, g, gR, d, r, z, p, Hp, Ftrial, Fxtrial;
+  Eigen::MatrixX3d xtrial;
   fit_into(c, F, x, Fx);
   double E = energy_along(c, F, Fx, nullptr, nullptr, 0.0) - work(x);
-  gradient_into(c, F, Fx, g);
-  double gn = g.norm();
-  const double scale = (disc_.geometry.volume.array() * (model_.mu.array() + model_.lambda.array() + c.act.array() +
-                                                         emu_.alpha * model_.acap_weight.array())).sum();
+  // g: Euclidean gradient; gR: bone columns projected to the tangent space.
+  auto update_gradient = [&] {
+    gradient_into(c, F, Fx, g);
+    gR = g;
+    if (bones) project_tangent(F, gR);
+  };
+  update_gradient();
+  double gn = gR.norm();
+  double scale = 0;
+  for (Eigen::Index t = 0; t < m; ++t)
+    scale += disc_.geometry.volume(t) * (emu_.alpha * model_.acap_weight(t) +
+                                         (disc_.is_bone_tet(t) ? 0.0 : model_.mu(t) + model_.lambda(t) + c.act(t)));
   Convergence conv{options_.rtol_grad, options_.rtol_energy, E, gn, 1e-13 * scale};
   SolveResult res;
   res.grad_norm0 = gn;
@@ -266,6 +368,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   auto precondition = [&](const Mat9X& in, Mat9X& out) {
     if (schur_) schur_->apply(in, out);
     else woodbury_->apply(in, out);
+    if (bones) project_tangent(F, out);
   };
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
     if (options_.interrupted && options_.interrupted()) {
@@ -294,18 +397,19 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     ++since_refresh;
     int cg_its = 0;
     if (emu_.step == EmuStep::Woodbury) {
-      woodbury_->apply(g, d);
+      precondition(gR, d);
       d = -d;
     } else {
       // Inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker).
       const double eta = std::min(emu_.cg_forcing_max, std::pow(gn / conv.g0, emu_.cg_forcing_exponent));
-      d.setZero(9, m);
-      r = -g;
+      d.setZero(9, nu);
+      r = -gR;
       precondition(r, z);
       p = z;
       double rz = dot(r, z);
       for (int i = 0; i < emu_.cg_max_iterations; ++i) {
-        hessian_product_into(exact ? A_exact : A, p, Hp);
+        if (bones) riemannian_product(exact ? A_exact : A, F, g, p, exact, Hp);
+        else hessian_product_into(exact ? A_exact : A, p, Hp);
         const double pHp = dot(p, Hp);
         if (!(pHp > 0)) {  // negative curvature (exact H is indefinite here): keep what we have
           if (i == 0) d = z;
@@ -323,24 +427,41 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
         rz = rz_new;
       }
     }
-    double slope = dot(g, d);
+    double slope = dot(gR, d);
     if (!(slope < 0)) {
-      precondition(g, d);
+      precondition(gR, d);
       d = -d;
-      slope = dot(g, d);
+      slope = dot(gR, d);
       if (!(slope < 0)) {
         res.status = "no descent direction (Hessian approximation broke down)";
         break;
       }
     }
-    fit_linear_into(d, dx, Fd);
-    const double Wx = work(x), Wdx = work(dx);
-    auto ls = armijo_backtracking(
-        [&](double s) { return energy_along(c, F, Fx, &d, &Fd, s) - Wx - s * Wdx; }, E, slope, options_);
+    // Without bones x*(F + s d) = x + s dx (one fit per direction); a bone's
+    // path R + s d is retracted to rotations, so each trial refits.
+    const double Wx = work(x);
+    double Wdx = 0;
+    if (!bones) {
+      fit_linear_into(d, dx, Fd);
+      Wdx = work(dx);
+    }
+    auto energy_at = [&](double s) {
+      if (!bones) return energy_along(c, F, Fx, &d, &Fd, s) - Wx - s * Wdx;
+      retract(F, d, s, Ftrial);
+      fit_into(c, Ftrial, xtrial, Fxtrial);
+      return energy_along(c, Ftrial, Fxtrial, nullptr, nullptr, 0.0) - work(xtrial);
+    };
+    auto ls = armijo_backtracking(energy_at, E, slope, options_);
     if (!ls.success) {
-      const double E1 = energy_along(c, F, Fx, &d, &Fd, 1.0) - Wx - Wdx;
-      Mat9X F1 = F + d, Fx1 = Fx + Fd, g1;
-      gradient_into(c, F1, Fx1, g1);
+      const double E1 = energy_at(1.0);
+      Mat9X g1;
+      if (bones) {
+        gradient_into(c, Ftrial, Fxtrial, g1);
+        project_tangent(Ftrial, g1);
+      } else {
+        Mat9X F1 = F + d, Fx1 = Fx + Fd;
+        gradient_into(c, F1, Fx1, g1);
+      }
       if (accept_at_roundoff(E1, g1.norm(), E, gn, conv.E0)) {
         ls.success = true;
         ls.step = 1.0;
@@ -351,17 +472,24 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
         break;
       }
     }
-    F += ls.step * d;
-    if (it % 50 == 0) {
-      fit_into(c, F, x, Fx);  // x*(F) is linear in F; refit now and then against drift
-    } else {
-      x += ls.step * dx;
-      Fx += ls.step * Fd;
-    }
     const double E_prev = E;
-    E = (it % 50 == 0) ? energy_along(c, F, Fx, nullptr, nullptr, 0.0) - work(x) : ls.energy;
-    gradient_into(c, F, Fx, g);
-    gn = g.norm();
+    if (bones) {
+      retract(F, d, ls.step, Ftrial);
+      F = Ftrial;
+      fit_into(c, F, x, Fx);
+      E = ls.energy;
+    } else {
+      F += ls.step * d;
+      if (it % 50 == 0) {
+        fit_into(c, F, x, Fx);  // x*(F) is linear in F; refit now and then against drift
+      } else {
+        x += ls.step * dx;
+        Fx += ls.step * Fd;
+      }
+      E = (it % 50 == 0) ? energy_along(c, F, Fx, nullptr, nullptr, 0.0) - work(x) : ls.energy;
+    }
+    update_gradient();
+    gn = gR.norm();
     res.iterations = it;
     res.cg_iterations += cg_its;
     last_cg = cg_its;
@@ -375,7 +503,9 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   }
   fit_into(c, F, x, Fx);
   res.positions = x;
-  res.F = F.transpose();
+  Mat9X Ft;
+  expand_unknowns(disc_, F, Ft);
+  res.F = Ft.transpose();
   res.energy = E;
   res.grad_norm = gn;
   res.rel_energy_change = conv.rel_energy_change;

@@ -11,6 +11,17 @@
 // gradients on the exact Hessian H v = A v - alpha C^T K_c^-1 C v (one
 // back-substitution per product), preconditioned by the Woodbury step.
 // Never a factorisation after setup.
+//
+// Movable bones: all tets of bone b share one unknown F_b, kept a rotation
+// (rigid: no elastic energy). Steps for F_b lie in the tangent space
+// {omega^ R}; the line search retracts R + s d to the nearest rotation (polar
+// decomposition), and the Newton Hessian is the Riemannian one on SO(3):
+//   Hess[v] = P_T(H v - v sym(R^T g)),  P_T(M) = R skew(R^T M).
+// The gradient norm reported and tested is the Riemannian one (bone blocks
+// projected to the tangent space): the normal part is the rigidity reaction.
+//
+// Unknowns: one per soft tet (tet order), then one per bone; the diagnostic
+// functions take and return #unknowns by 9 arrays (= #T by 9 without bones).
 #include <memory>
 
 #include "emu/linalg/modes.h"
@@ -26,10 +37,12 @@ class EmuSolver {
  public:
   EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options);
 
-  /// F0  #T by 9 start (vec(F) column-major per row; nullptr: identity)
+  /// F0  #T by 9 start (vec(F) column-major per row, per tet as in SolveResult::F;
+  ///     a bone's F is read from its first tet; nullptr: identity)
   SolveResult solve(const LoadCase& load, const Eigen::MatrixXd* F0 = nullptr);
 
-  // The pieces, for tests and diagnostics. F, V, R: #T by 9.
+  // The pieces, for tests and diagnostics. F, V, R: #unknowns by 9.
+  // gradient / hessian_product are Euclidean (no tangent projection).
   double energy(const LoadCase& load, const Eigen::MatrixXd& F) const;
   Eigen::MatrixXd gradient(const LoadCase& load, const Eigen::MatrixXd& F) const;
   Eigen::MatrixX3d fit_positions(const LoadCase& load, const Eigen::MatrixXd& F) const;
@@ -38,7 +51,7 @@ class EmuSolver {
                                   bool exact = false) const;
   /// H_k^-1 R with the solver's k modes.
   Eigen::MatrixXd woodbury_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R) const;
-  /// Blocks A_t, #T by 81 (column-major 9x9 per row); filtered unless exact.
+  /// Blocks A_u, #unknowns by 81 (column-major 9x9 per row); filtered unless exact.
   Eigen::MatrixXd block_hessians(const LoadCase& load, const Eigen::MatrixXd& F, bool exact = false) const;
   Eigen::MatrixXd mode_matrix() const { return woodbury_->dense_B(); }
   Eigen::VectorXd mode_values() const { return woodbury_->lambda(); }
@@ -50,10 +63,14 @@ class EmuSolver {
   double setup_seconds() const { return factor_seconds_ + modes_seconds_; }
   double factor_nnz() const { return acap_->factor().factor_nnz(); }
   const Model& model() const { return model_; }
+  int num_unknowns() const { return disc_.num_unknowns; }
+  /// Unknown of each tet (#T).
+  const Eigen::VectorXi& unknown_of_tet() const { return disc_.owner; }
 
  private:
-  struct Context;  // per-load data: activations, pinned share of F, gravity terms
+  struct Context;  // per-load data: activations, pinned share of F, joint targets, gravity terms
   Context make_context(const LoadCase& load) const;
+  // F: 9 x #unknowns; Fx, Fd: 9 x #T (F_t of the fit).
   double energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
                       const Mat9X* Fd, double s) const;
   void gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx, Mat9X& g) const;
@@ -61,6 +78,12 @@ class EmuSolver {
   void hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) const;
   void fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const;
   void fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const;
+  // Bones: tangent projection of the bone columns of v at F; F + s d retracted to rotations.
+  void project_tangent(const Mat9X& F, Mat9X& v) const;
+  void retract(const Mat9X& F, const Mat9X& d, double s, Mat9X& out) const;
+  // Riemannian Hessian product: bone columns P_T(Hv - v sym(R^T g)).
+  void riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
+                          bool curvature, Mat9X& out) const;
   Mat9X to_cols(const Eigen::MatrixXd& rows) const;
 
   Model model_;

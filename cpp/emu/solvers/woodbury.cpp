@@ -16,20 +16,23 @@ Woodbury::Woodbury(const Model& model, const Discretization& disc, const AcapOpe
       alpha_(alpha),
       values_(modes.values),
       psi_(modes.vectors),
-      Ainv_(model.tets.rows()) {}
+      Ainv_(disc.num_unknowns) {
+  psi_vertex_ = Eigen::MatrixXd::Zero(model.rest.rows(), ks_);
+  if (ks_) acap.expand(psi_, psi_vertex_);
+}
 
-void Woodbury::mode_gradients(Eigen::Index t, Eigen::Matrix<double, 3, Eigen::Dynamic>& g) const {
-  const ShapeGrads& b = disc_.geometry.grad[t];
+void Woodbury::mode_gradients(Eigen::Index u, Eigen::Matrix<double, 3, Eigen::Dynamic>& g) const {
   g.setZero(3, ks_);
-  for (int a = 0; a < 4; ++a) {
-    const int v = disc_.free_index(model_.tets(t, a));
-    if (v < 0) continue;
-    g.noalias() += b.row(a).transpose() * psi_.row(v);
+  const Eigen::VectorXd& wv = acap_.weight_volume();
+  for (int i = disc_.unknown_ptr[u]; i < disc_.unknown_ptr[u + 1]; ++i) {
+    const int t = disc_.unknown_tets[i];
+    const ShapeGrads& b = disc_.geometry.grad[t];
+    for (int a = 0; a < 4; ++a) g.noalias() += (wv(t) * b.row(a).transpose()) * psi_vertex_.row(model_.tets(t, a));
   }
 }
 
 bool Woodbury::update(const std::vector<Mat9>& A) {
-  const long m = static_cast<long>(A.size());
+  const long m = static_cast<long>(A.size());  // unknowns
   x_ok_ = false;
   if (ks_ == 0) {
 #pragma omp parallel for schedule(static)
@@ -37,7 +40,6 @@ bool Woodbury::update(const std::vector<Mat9>& A) {
     return true;
   }
   const int k = 3 * ks_;
-  const Eigen::VectorXd& wv = acap_.weight_volume();
   // X = Lambda/alpha - sum_t M_t M_t^T with M_t = B_t L_t^-T (A_t = L_t L_t^T),
   // accumulated by SYRK over chunks of tets (rows of the chunk buffer: 9 per tet).
   Eigen::MatrixXd X = Eigen::MatrixXd::Zero(k, k);
@@ -52,7 +54,7 @@ bool Woodbury::update(const std::vector<Mat9>& A) {
     {
       Eigen::Matrix<double, 9, Eigen::Dynamic> BT(9, k);  // per-thread buffers
       Eigen::Matrix<double, 3, Eigen::Dynamic> g(3, ks_);
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 64)
       for (long i = 0; i < nt; ++i) {
         const long t = t0 + i;
         const Eigen::LLT<Mat9> llt(A[t]);
@@ -61,7 +63,7 @@ bool Woodbury::update(const std::vector<Mat9>& A) {
         BT.setZero();
         for (int l = 0; l < ks_; ++l)
           for (int c = 0; c < 3; ++c)
-            for (int j = 0; j < 3; ++j) BT(c + 3 * j, c + 3 * l) = wv(t) * g(j, l);
+            for (int j = 0; j < 3; ++j) BT(c + 3 * j, c + 3 * l) = g(j, l);
         llt.matrixL().solveInPlace(BT);  // L^-1 B^T = M_t^T
         buf.block(9 * i, 0, 9, k) = BT;
       }
@@ -83,8 +85,10 @@ void Woodbury::apply(const Mat9X& r, Mat9X& out) const {
   for (long t = 0; t < m; ++t) out.col(t).noalias() = Ainv_[t] * r.col(t);
   if (!x_ok_ || ks_ == 0) return;
   // s = X^-1 B z with B z = Psi^T (C z): entry c + 3 l is (Psi^T y)(l, c).
+  Mat9X per_tet;
+  expand_unknowns(disc_, out, per_tet);
   Eigen::MatrixX3d y;
-  acap_.apply_C(out, y);
+  acap_.apply_C(per_tet, y);
   const Eigen::MatrixXd Bz = psi_.transpose() * y;  // ks x 3
   Eigen::VectorXd t(3 * ks_);
   for (int l = 0; l < ks_; ++l)
@@ -96,21 +100,21 @@ void Woodbury::apply(const Mat9X& r, Mat9X& out) const {
   // B^T s = C^T (Psi S), then A^-1 of it.
   const Eigen::MatrixX3d u = psi_ * S;
   Mat9X bts;
-  acap_.apply_CT(u, bts);
+  acap_.apply_CT(u, per_tet);
+  reduce_to_unknowns(disc_, per_tet, bts);
 #pragma omp parallel for schedule(static)
   for (long t = 0; t < m; ++t) out.col(t).noalias() += Ainv_[t] * bts.col(t);
 }
 
 Eigen::MatrixXd Woodbury::dense_B() const {
-  const long m = model_.tets.rows();
-  const Eigen::VectorXd& wv = acap_.weight_volume();
+  const long m = disc_.num_unknowns;
   Eigen::MatrixXd B = Eigen::MatrixXd::Zero(3 * ks_, 9 * m);
   Eigen::Matrix<double, 3, Eigen::Dynamic> g(3, ks_);
-  for (long t = 0; t < m; ++t) {
-    mode_gradients(t, g);
+  for (long u = 0; u < m; ++u) {
+    mode_gradients(u, g);
     for (int l = 0; l < ks_; ++l)
       for (int c = 0; c < 3; ++c)
-        for (int j = 0; j < 3; ++j) B(c + 3 * l, 9 * t + c + 3 * j) = wv(t) * g(j, l);
+        for (int j = 0; j < 3; ++j) B(c + 3 * l, 9 * u + c + 3 * j) = g(j, l);
   }
   return B;
 }

@@ -10,10 +10,12 @@
 //
 // Modes of K = L (x) I_3 come in triples: scalar mode psi_l of L in coordinate
 // c is mode index c + 3 l. B is never stored: B z = Psi^T (C z) and
-// B^T s = C^T (Psi S) go through vertex space (a gather and two thin GEMMs),
-// far cheaper per application than per-tet k x 9 blocks. Only forming X needs
-// the per-tet blocks B_t[(c,l), c + 3 j] = w_t V_t g_tl[j] with
-// g_tl = sum_a psi_l[v_a] b_a, computed on the fly.
+// B^T s = C^T (Psi S) go through position space (a gather and two thin GEMMs),
+// far cheaper per application than per-unknown k x 9 blocks. Only forming X
+// needs the blocks B_u[(c,l), c + 3 j] = sum_{t of u} w_t V_t g_tl[j] with
+// g_tl = sum_a psi_l[v_a] b_a (psi expanded to the vertices: bone vertices
+// through their bone's map), computed on the fly. An unknown is one soft tet
+// or one bone (all its tets).
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -28,25 +30,25 @@ namespace emu {
 
 class Woodbury {
  public:
-  /// modes  scalar modes of L (num_free by ks) and their eigenvalues
+  /// modes  scalar constrained modes (acap.dofs() by ks) and their eigenvalues
   Woodbury(const Model& model, const Discretization& disc, const AcapOperator& acap, const Modes& modes,
            double alpha);
 
-  /// Invert the blocks A_t (#T of them, SPD) and form X with one symmetric
+  /// Invert the blocks A_u (one per unknown, SPD) and form X with one symmetric
   /// rank update (SYRK). Returns false if X is not SPD (apply() then uses A^-1).
   bool update(const std::vector<Mat9>& A);
 
-  /// out = H_k^-1 r; r, out are 9 x #T.
+  /// out = H_k^-1 r; r, out are 9 x #unknowns.
   void apply(const Mat9X& r, Mat9X& out) const;
 
   int k() const { return 3 * ks_; }
-  /// Dense B (k x 9#T) and Lambda (k), for tests.
+  /// Dense B (k x 9 #unknowns) and Lambda (k), for tests.
   Eigen::MatrixXd dense_B() const;
   Eigen::VectorXd lambda() const;
 
  private:
-  /// g_tl for every l, as the columns of a 3 x ks matrix.
-  void mode_gradients(Eigen::Index t, Eigen::Matrix<double, 3, Eigen::Dynamic>& g) const;
+  /// sum_{t of u} w_t V_t g_tl for every l, as the columns of a 3 x ks matrix.
+  void mode_gradients(Eigen::Index u, Eigen::Matrix<double, 3, Eigen::Dynamic>& g) const;
 
   const Model& model_;
   const Discretization& disc_;
@@ -54,8 +56,9 @@ class Woodbury {
   int ks_;
   double alpha_;
   Eigen::VectorXd values_;  // ks scalar eigenvalues
-  Eigen::MatrixXd psi_;     // num_free x ks scalar modes
-  std::vector<Mat9> Ainv_;  // A_t^-1 (explicit: one 9x9 product per application)
+  Eigen::MatrixXd psi_;     // dofs x ks scalar modes
+  Eigen::MatrixXd psi_vertex_;  // #V x ks: the modes at the vertices (zero at pinned ones)
+  std::vector<Mat9> Ainv_;  // A_u^-1 (explicit: one 9x9 product per application)
   Eigen::LLT<Eigen::MatrixXd> X_llt_;
   bool x_ok_ = false;
 };
