@@ -53,6 +53,8 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("muscle", &Model::muscle)
       .def_readwrite("pinned", &Model::pinned)
       .def_readwrite("num_muscles", &Model::num_muscles)
+      .def_readwrite("bone", &Model::bone, "#T movable-bone id per tet, -1 for soft tissue (empty: no bones)")
+      .def_readwrite("num_bones", &Model::num_bones)
       .def("validate", &Model::validate);
 
   py::class_<LoadCase>(m, "LoadCase")
@@ -86,7 +88,8 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max)
       .def_readwrite("cg_forcing_exponent", &EmuOptions::cg_forcing_exponent)
       .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh)
-      .def_readwrite("preconditioner", &EmuOptions::preconditioner);
+      .def_readwrite("preconditioner", &EmuOptions::preconditioner)
+      .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space);
 
   py::class_<SolveResult>(m, "SolveResult")
       .def_readonly("positions", &SolveResult::positions)
@@ -152,6 +155,8 @@ void bind_solvers(py::module_& m) {
       .def("mode_matrix", &EmuSolver::mode_matrix)
       .def("mode_values", &EmuSolver::mode_values)
       .def_property_readonly("modes", &EmuSolver::modes)
+      .def_property_readonly("num_unknowns", &EmuSolver::num_unknowns)
+      .def_property_readonly("unknown_of_tet", &EmuSolver::unknown_of_tet)
       .def_property_readonly("alpha", &EmuSolver::alpha)
       .def_property_readonly("factor_seconds", &EmuSolver::factor_seconds)
       .def_property_readonly("modes_seconds", &EmuSolver::modes_seconds)

@@ -113,13 +113,13 @@ def write_solution(path, scene, solution):
           point_data={"displacement": x - scene.points})
 
 
-def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, fix_bones=True, warn=True,
+def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_bones=(), warn=True,
                fibers="file"):
     """A Scene from a labelled tet mesh (the shared scenes, or any mesh with a
     ``part`` label and ``fiber`` cell data): parts of kind ``muscle`` become
     muscles with the file's fibres (fibers="file") or a Laplace field between
     their two bone attachments (fibers="laplace"), ``tendon`` tendons, ``bone``
-    fixed bones (their vertices pinned)."""
+    bones: fixed, except those named in free_bones, which the muscles move."""
     if fibers not in ("file", "laplace"):
         raise ValueError(f"fibers must be 'file' or 'laplace', got {fibers!r}")
     from .scene import Scene
@@ -133,6 +133,13 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, fix_b
             warnings.simplefilter("ignore")
         scene = Scene(mesh.points, mesh.tets, warn=warn)
     fib = mesh.fiber
+    free_bones = [free_bones] if isinstance(free_bones, str) else list(free_bones)
+    bone_names = [mesh.part_names.get(int(p), f"part{p}") for p in np.unique(part)
+                  if mesh.part_kinds.get(int(p), "muscle") == "bone"]
+    unknown = sorted(set(free_bones) - set(bone_names))
+    if unknown:
+        raise ValueError(f"free_bones: {path} has no bone named {', '.join(map(repr, unknown))} "
+                         f"(bones: {', '.join(bone_names) or 'none'})")
     for pid in np.unique(part):
         name = mesh.part_names.get(int(pid), f"part{pid}")
         kind = mesh.part_kinds.get(int(pid), "muscle")
@@ -148,9 +155,7 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, fix_b
         elif kind == "tendon":
             scene.add_tendon(name, idx, poisson=poisson)
         elif kind == "bone":
-            if not fix_bones:
-                raise NotImplementedError("moving bones are not supported yet: load with fix_bones=True")
-            scene.add_bone(name, idx, youngs=bone_youngs, poisson=poisson)
+            scene.add_bone(name, idx, youngs=bone_youngs, poisson=poisson, fixed=name not in free_bones)
         else:
             raise ValueError(f"{path}: part '{name}' has unknown kind '{kind}' (muscle, tendon or bone)")
     if fibers == "laplace":

@@ -27,6 +27,12 @@ def lame(youngs: float, poisson: float) -> tuple[float, float]:
     return mu, lam
 
 
+# ACAP weight of movable bones' tets: the fitted bone positions follow the
+# bone's rotation to about 1/weight of the soft tissue's pull (measured in
+# docs/DESIGN.md); large weights only touch the small dense bone block.
+BONE_ACAP_WEIGHT = 100.0
+
+
 @dataclass
 class Part:
     name: str
@@ -38,6 +44,7 @@ class Part:
     acap_weight: float
     fibers: np.ndarray | None = None   # (len(tets), 3) unit vectors, muscles only
     max_activation: float = 1e5        # a for normalised activation 1.0
+    fixed: bool = True                 # bones: fixed (or scripted) rather than moved by the muscles
 
     @property
     def mu(self) -> float:
@@ -142,17 +149,28 @@ class Scene:
                               acap_weight if acap_weight is not None else np.nan))
 
     def add_bone(self, name: str, tets, *, youngs: float = 1e10, poisson: float = 0.49,
-                 density: float = 1900.0, fixed: bool = True) -> Part:
-        """A bone. A bone is rigid and prescribed: at rest, or scripted per solve
-        (Solver.solve(bone_poses=...)); its tets carry no unknowns and are left out
-        of the solve; muscle vertices it shares are attachments. (Bones swung by
-        the muscles, with joints as constraints: not yet available.)"""
-        if not fixed:
-            raise NotImplementedError(f"bone '{name}': bones moved by the muscles are not available yet; use "
-                                      "fixed=True (the bone can still be scripted with bone_poses=)")
+                 density: float = 1900.0, fixed: bool = True, acap_weight: float = BONE_ACAP_WEIGHT) -> Part:
+        """A bone: rigid. Muscle vertices it shares are attachments; vertices it
+        shares with another bone are a joint (see joints()).
+
+        fixed=True   the bone is prescribed: at rest, or scripted per solve
+                     (Solver.solve(bone_poses=...)); its tets are left out of the solve.
+        fixed=False  the muscles move it: a rigid body, turning about its joints with
+                     fixed bones (one shared vertex: ball joint, two: hinge) or free
+                     if it has none. Its density counts under gravity.
+        acap_weight  EMU's ACAP weight on the bone's tets (movable bones): the larger,
+                     the closer the fitted positions follow the bone's rotation.
+        """
         idx = self._tet_ids(name, tets)
         lame(youngs, poisson)
-        return self._add(Part(name, "bone", idx, youngs, poisson, density, 1.0))
+        if not acap_weight > 0:
+            raise ValueError(f"bone '{name}': acap_weight must be positive, got {acap_weight!r}")
+        return self._add(Part(name, "bone", idx, youngs, poisson, density, float(acap_weight), fixed=bool(fixed)))
+
+    @property
+    def movable_bones(self) -> list:
+        """Names of the bones the muscles move (fixed=False), in the solver's order."""
+        return [p.name for p in self.parts.values() if p.kind == "bone" and not p.fixed]
 
     def attachments(self, muscle: str) -> dict:
         """{bone name: vertex ids} where the muscle shares vertices with a bone."""
@@ -258,7 +276,7 @@ class Scene:
         """Ids of the tets that carry unknowns (all but those of fixed bones)."""
         bone = np.zeros(len(self.tets), bool)
         for p in self.parts.values():
-            if p.kind == "bone":
+            if p.kind == "bone" and p.fixed:
                 bone[p.tets] = True
         return np.flatnonzero(~bone)
 
@@ -270,7 +288,7 @@ class Scene:
         fixed = ~used
         fixed[self.pinned] = True
         for p in self.parts.values():
-            if p.kind == "bone":
+            if p.kind == "bone" and p.fixed:
                 fixed[self.tets[p.tets].ravel()] = True
         ids = np.flatnonzero(fixed)
         pos = self.points[ids].copy()
@@ -306,7 +324,8 @@ class Scene:
             raise ValueError(f"{len(free)} tet(s) belong to no part (e.g. tet {free[0]}); add them to a "
                              "muscle, tendon or bone")
         soft = self.model_tets
-        if len(soft) == 0:
+        movable = [p for p in self.parts.values() if p.kind == "bone" and not p.fixed]
+        if len(soft) == sum(len(p.tets) for p in movable):
             raise ValueError("the scene has no muscle or tendon tets: nothing to simulate")
         used = np.zeros(len(self.points), bool)
         used[self.tets[soft].ravel()] = True
@@ -321,8 +340,24 @@ class Scene:
             size = int(np.sum(comp[used] == loose[0]))
             raise ValueError(f"{len(loose)} connected piece(s) of the mesh have no pinned vertex (one has "
                              f"{size} vertices); pin a vertex of every piece")
+        self._check_movable_bones(pins)
         if not np.all(np.isfinite(self.gravity)) or np.shape(self.gravity) != (3,):
             raise ValueError(f"gravity must be a finite 3-vector, got {self.gravity!r}")
+
+    def _check_movable_bones(self, pins):
+        """A movable bone held at three or more non-collinear vertices cannot move."""
+        diag = float(np.linalg.norm(self.points.max(0) - self.points.min(0)))
+        for p in self.parts.values():
+            if p.kind != "bone" or p.fixed:
+                continue
+            held = np.intersect1d(np.unique(self.tets[p.tets].ravel()), pins)
+            if len(held) < 3:
+                continue
+            X = self.points[held] - self.points[held[0]]
+            if np.linalg.svd(X, compute_uv=False)[1] > 1e-6 * diag:
+                raise ValueError(f"movable bone '{p.name}' shares {len(held)} non-collinear vertices with pinned "
+                                 "vertices or fixed bones, so it cannot move (a weld); make it fixed=True, or "
+                                 "let it share one vertex (ball joint) or two (hinge)")
 
     def acap_weight_of(self, part: Part) -> float:
         """The ACAP weight of a part (tendons without an explicit weight: default_tendon_weight)."""
@@ -339,8 +374,12 @@ class Scene:
         mu, lam, rho, w = (np.empty(m) for _ in range(4))
         fib = np.zeros((m, 3))
         muscle = np.full(m, -1, np.int32)
+        bone = np.full(m, -1, np.int32)
         names = self.muscles
+        movable = self.movable_bones
         for p in self.parts.values():
+            if p.kind == "bone" and not p.fixed:
+                bone[p.tets] = movable.index(p.name)
             pm, pl = lame(p.youngs, p.poisson)
             mu[p.tets], lam[p.tets], rho[p.tets] = pm, pl, p.density
             w[p.tets] = self.acap_weight_of(p)
@@ -355,6 +394,9 @@ class Scene:
         model.muscle = muscle[keep]
         model.pinned = self.model_pins()[0].astype(np.int32)
         model.num_muscles = len(names)
+        if movable:
+            model.bone = bone[keep]
+            model.num_bones = len(movable)
         return model
 
     def __repr__(self):

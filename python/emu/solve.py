@@ -78,13 +78,15 @@ class Solver:
                   Hessian through the position-space Schur complement: one factorisation per rebuild)
     preconditioner_refresh  Newton-Krylov: rebuild the preconditioner every n steps (sooner if CG slows)
     exact_when_definite  use the unfiltered Hessian when it is definite (see README)
+    bone_coarse_space  EMU with movable bones: add a coarse correction for the bones'
+                  rotations to the preconditioner (fewer CG iterations; docs/DESIGN.md)
     threads       OpenMP and OpenBLAS threads (None: leave as is)
     """
 
     def __init__(self, scene: Scene, method: str = "emu", *, alpha: float = 100.0, modes: int = 24,
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
                  max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "woodbury",
-                 preconditioner_refresh: int = 3,
+                 preconditioner_refresh: int = 3, bone_coarse_space: bool = True,
                  exact_when_definite: bool = True, threads: int | None = None):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -125,6 +127,7 @@ class Solver:
             if preconditioner not in ("woodbury", "schur"):
                 raise ValueError(f"preconditioner must be 'woodbury' or 'schur', got {preconditioner!r}")
             eo.preconditioner = getattr(_core.EmuPreconditioner, preconditioner)
+            eo.bone_coarse_space = bool(bone_coarse_space)
             self._core = _core.EmuSolver(self.model, opts, eo)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
                                  preconditioner=preconditioner if step == "newton-krylov" else None)
@@ -160,6 +163,9 @@ class Solver:
         for name, pose in bone_poses.items():
             if name not in bones:
                 raise ValueError(f"bone_poses: no bone named '{name}' (bones: {', '.join(bones) or 'none'})")
+            if not bones[name].fixed:
+                raise ValueError(f"bone_poses: bone '{name}' is moved by the muscles (fixed=False); only fixed "
+                                 "bones can be scripted")
             poses[name] = _pose(name, pose)
 
         def placed(name, X):  # where bone `name` puts rest points X
@@ -176,6 +182,8 @@ class Solver:
         diag = float(np.linalg.norm(self.scene.points.max(0) - self.scene.points.min(0)))
         for joint in self.scene.joints():
             a, b = joint["bones"]
+            if not (bones[a].fixed and bones[b].fixed):
+                continue  # a movable bone follows its joint by itself
             X = self.scene.points[joint["vertices"]]
             gap = np.linalg.norm(placed(a, X) - placed(b, X), axis=1)
             if gap.max() > 1e-9 * diag:

@@ -206,7 +206,7 @@ void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>*
 #pragma omp parallel for schedule(static)
   for (int u = 0; u < ns; ++u) {
     const int t = disc_.unknown_tets[u];
-    const Mat3 Ft = unflatten(F.col(t));
+    const Mat3 Ft = unflatten(F.col(u));
     const Mat9 H = snh::hessian(Ft, model_.mu(t), model_.lambda(t));
     Mat9 fib = Mat9::Zero();
     if (c.act(t) != 0.0) fib = fiber::hessian(model_.fiber.row(t).transpose(), c.act(t));
@@ -365,10 +365,49 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   // rebuilt (eigen-filtered blocks, SYRK) every preconditioner_refresh
   // iterations, or sooner when CG slows down by half since the last rebuild.
   int since_refresh = 0, cg_after_refresh = -1, last_cg = 0;
+  // Bones: the Woodbury term sees a bone's block as stiff as its ACAP weight
+  // (alpha sum w V), while turning a bone with the soft tissue following is
+  // cheap; CG then spends many iterations on the bones' rotations. A coarse
+  // correction over Z = {turn bone b about axis k, soft F_t following the
+  // fitted positions} (3 per bone) adds Z (Z^T H Z)^-1 Z^T (additive
+  // two-level preconditioner; rebuilt with the Woodbury term).
+  std::vector<Mat9X> coarse_Z;
+  Eigen::LLT<Eigen::MatrixXd> coarse_E;
+  bool coarse_ok = false;
+  auto build_coarse = [&](const std::vector<Mat9>& Ablocks) {
+    const int nz = 3 * disc_.num_bones;
+    coarse_Z.assign(nz, Mat9X::Zero(9, nu));
+    Eigen::MatrixX3d dxk;
+    Mat9X Fdk, HZ;
+    for (int b = 0; b < disc_.num_bones; ++b)
+      for (int k = 0; k < 3; ++k) {
+        Mat9X& Z = coarse_Z[3 * b + k];
+        const int ub = disc_.num_soft + b;
+        Mat3 W = Mat3::Zero();
+        W((k + 2) % 3, (k + 1) % 3) = 1.0;
+        W((k + 1) % 3, (k + 2) % 3) = -1.0;
+        Z.col(ub) = flatten(Mat3(W * unflatten(F.col(ub))));
+        fit_linear_into(Z, dxk, Fdk);
+        for (int u = 0; u < disc_.num_soft; ++u) Z.col(u) = Fdk.col(disc_.unknown_tets[u]);
+      }
+    Eigen::MatrixXd E(nz, nz);
+    for (int j = 0; j < nz; ++j) {
+      riemannian_product(Ablocks, F, g, coarse_Z[j], false, HZ);
+      for (int i = 0; i < nz; ++i) E(i, j) = dot(coarse_Z[i], HZ);
+    }
+    coarse_E.compute(0.5 * (E + E.transpose()));
+    coarse_ok = coarse_E.info() == Eigen::Success;
+  };
   auto precondition = [&](const Mat9X& in, Mat9X& out) {
     if (schur_) schur_->apply(in, out);
     else woodbury_->apply(in, out);
-    if (bones) project_tangent(F, out);
+    if (!bones) return;
+    project_tangent(F, out);
+    if (!coarse_ok) return;
+    Eigen::VectorXd zr(coarse_Z.size());
+    for (size_t i = 0; i < coarse_Z.size(); ++i) zr(i) = dot(coarse_Z[i], in);
+    const Eigen::VectorXd c = coarse_E.solve(zr);
+    for (size_t i = 0; i < coarse_Z.size(); ++i) out += c(i) * coarse_Z[i];
   };
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
     if (options_.interrupted && options_.interrupted()) {
@@ -389,6 +428,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       } else {
         woodbury_->update(A);
       }
+      if (bones && emu_.bone_coarse_space) build_coarse(A);
       since_refresh = 0;
       cg_after_refresh = -1;
     } else {

@@ -2,6 +2,17 @@
 // The reference: Newton on vertex positions with PSD-projected element
 // Hessians, assembled deterministically into a fixed pattern and factorised
 // by CHOLMOD every iteration (symbolic analysis once), Armijo backtracking.
+//
+// Movable bones are rigid bodies: x_v = R_b (X_v - P_b) + p_b. Their unknowns
+// are exponential-map increments, re-linearised every iteration
+// (R <- exp(omega^) R): a free bone has omega and a translation (6), a bone on
+// a ball joint (one vertex shared with a pinned vertex or fixed bone) turns
+// about it (omega, 3), a hinge (two or more collinear shared vertices) about
+// its axis (1). The bone rows border the soft-vertex matrix: per iteration one
+// factorisation of the soft block, #bone-dof back-substitutions and a small
+// dense Schur complement. The Newton matrix includes the rotation's second-
+// order term sum_v [ (f_v r_v^T + r_v f_v^T)/2 - (f_v . r_v) I ] (f = dE/dx,
+// r = x - p). Joints between two movable bones are not supported here.
 #include <memory>
 
 #include "emu/linalg/cholmod_factor.h"
@@ -32,6 +43,8 @@ class FemSolver {
                      Eigen::VectorXd& g) const;
   double energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const Eigen::Vector3d& grav) const;
   void assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, bool exact);
+  void vertex_forces(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const Eigen::Vector3d& grav,
+                     Eigen::MatrixX3d& f) const;
 
   Model model_;
   Discretization disc_;
@@ -39,6 +52,7 @@ class FemSolver {
   BlockPattern pattern_;
   CholmodFactor factor_;
   std::vector<double> element_, values_;
+  std::vector<int> bone_touching_;  // soft tets with a corner on a movable bone
   mutable std::vector<double> corner_, tet_energy_;
   double setup_seconds_ = 0;
 };

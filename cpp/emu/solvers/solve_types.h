@@ -43,6 +43,7 @@ struct EmuOptions {
   double cg_forcing_exponent = 0.5;
   EmuPreconditioner preconditioner = EmuPreconditioner::Woodbury;
   int preconditioner_refresh = 3;  // Newton-Krylov: rebuild the Woodbury preconditioner every n steps
+  bool bone_coarse_space = true;   // movable bones: add the bone-rotation coarse correction (see emu_solver.cpp)
 };
 
 struct IterationRecord {
