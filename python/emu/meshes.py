@@ -1,4 +1,5 @@
-"""Procedural meshes: a fusiform (spindle) muscle with tendon caps.
+"""Procedural meshes: a fusiform (spindle) muscle with tendon caps, and a
+two-bone arm with a hinged elbow, a flexor and an extensor (``arm``).
 
 The mesh is a structured grid: a square cross-section grid mapped onto a
 rounded square (a blend between the square and its circumscribed circle that
@@ -15,7 +16,7 @@ from itertools import permutations
 
 import numpy as np
 
-__all__ = ["FusiformMesh", "fusiform", "resolution_for_tets"]
+__all__ = ["FusiformMesh", "fusiform", "resolution_for_tets", "ArmMesh", "arm", "block_mesh"]
 
 ROUNDING = 0.6  # 0: square cross-section, 1: disk (slivers at the corners)
 
@@ -115,3 +116,98 @@ def fusiform(resolution: int = 6, *, tets: int | None = None, length: float = 10
     return FusiformMesh(points=points, tets=tets, fibers=fib, is_tendon=is_tendon,
                         proximal=np.flatnonzero(np.isclose(zs, 0.0)),
                         distal=np.flatnonzero(np.isclose(zs, length)), length=length)
+
+
+def _kuhn_tets(corner) -> np.ndarray:
+    """Six positively ordered corner paths of a hex (Kuhn subdivision); corner(di, dj, dk) -> ids."""
+    tets = []
+    for perm in permutations(range(3)):
+        path = [(0, 0, 0)]
+        cur = [0, 0, 0]
+        for axis in perm:
+            cur[axis] = 1
+            path.append(tuple(cur))
+        tets.append(np.stack([corner(*c) for c in path], axis=1))
+    return np.concatenate(tets, axis=0)
+
+
+def block_mesh(blocks: dict, resolution: int, size: float = 1.0, depth: int = 1):
+    """A conforming tet mesh of unit blocks on an integer grid.
+
+    blocks      {label: list of (i, j) block coordinates}; block (i, j) spans
+                [i, i+1] x [j, j+1] x [0, depth] (times size)
+    resolution  hex cells per block side; each hex is six Kuhn tets, conforming
+                across blocks, so neighbouring blocks share their face vertices
+    Returns (points (n, 3), tets (m, 4) positively oriented, labels (m,) index
+    into list(blocks)); vertices no tet uses are dropped.
+    """
+    r = int(resolution)
+    if r < 1:
+        raise ValueError(f"resolution must be >= 1, got {resolution}")
+    all_ij = np.array([ij for v in blocks.values() for ij in v])
+    lo = all_ij.min(axis=0)
+    ni, nj = (all_ij.max(axis=0) - lo + 1) * r
+    nk = depth * r
+
+    def vid(i, j, k):
+        return (i * (nj + 1) + j) * (nk + 1) + k
+
+    tets, labels = [], []
+    for label, (name, cells) in enumerate(blocks.items()):
+        for (bi, bj) in cells:
+            I, J, K = np.meshgrid(np.arange(r) + (bi - lo[0]) * r, np.arange(r) + (bj - lo[1]) * r,
+                                  np.arange(nk), indexing="ij")
+            I, J, K = I.ravel(), J.ravel(), K.ravel()
+            t = _kuhn_tets(lambda di, dj, dk: vid(I + di, J + dj, K + dk))
+            tets.append(t)
+            labels.append(np.full(len(t), label))
+    tets = np.concatenate(tets).astype(np.int64)
+    labels = np.concatenate(labels)
+    I, J, K = np.meshgrid(np.arange(ni + 1), np.arange(nj + 1), np.arange(nk + 1), indexing="ij")
+    points = np.stack([(I.ravel() / r + lo[0]), (J.ravel() / r + lo[1]), K.ravel() / r], axis=1) * size
+    used, inverse = np.unique(tets, return_inverse=True)
+    tets = inverse.reshape(tets.shape)
+    points = points[used]
+    p = points[tets]
+    vol = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]))
+    neg = vol < 0
+    tets[neg] = tets[neg][:, [0, 2, 1, 3]]
+    return points, tets, labels
+
+
+@dataclass
+class ArmMesh:
+    points: np.ndarray   # (n, 3) rest positions
+    tets: np.ndarray     # (m, 4)
+    parts: dict          # {"humerus" | "forearm" | "flexor" | "extensor": tet ids}
+    elbow: np.ndarray    # a point on the hinge axis
+    axis: np.ndarray     # the hinge axis (+z: flexion is a positive turn about it)
+
+
+def arm(resolution: int = 2, *, block: float = 0.02, length: int = 6) -> ArmMesh:
+    """A procedural arm in the x-y plane, one block (``block`` metres) thick:
+
+    - humerus: a rod of ``length`` blocks pointing up (+y) from the elbow;
+    - forearm: a rod of ``length`` blocks pointing along +x, bent 90 degrees;
+      the two bones share only the edge of vertices on the elbow axis (z
+      through the origin): a hinge;
+    - flexor: a diagonal band in the angle between the bones, from the front of
+      the humerus to the top of the forearm (contracting it bends the elbow);
+    - extensor: a band wrapped behind the elbow, from the back of the humerus to
+      the underside of the forearm (contracting it straightens the elbow).
+
+    38 blocks of 6 resolution^3 tets (resolution 2: 1.8k tets, 3: 6.2k, 4: 14.6k).
+    """
+    n = int(length)
+    if n < 4:
+        raise ValueError(f"length must be >= 4 blocks, got {length}")
+    blocks = {
+        "humerus": [(-1, j) for j in range(n)],
+        "forearm": [(i, -1) for i in range(n)],
+        "flexor": [(i, j) for i in range(n) for j in range(n) if 3 <= i + j <= 5],
+        "extensor": [(-2, j) for j in range(-2, n - 1)] + [(i, -2) for i in range(-1, n // 2)],
+    }
+    points, tets, labels = block_mesh(blocks, resolution, size=block)
+    names = list(blocks)
+    parts = {name: np.flatnonzero(labels == i) for i, name in enumerate(names)}
+    return ArmMesh(points=points, tets=tets, parts=parts, elbow=np.zeros(3), axis=np.array([0.0, 0.0, 1.0]))

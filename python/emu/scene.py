@@ -30,7 +30,7 @@ def lame(youngs: float, poisson: float) -> tuple[float, float]:
 # ACAP weight of movable bones' tets: the fitted bone positions follow the
 # bone's rotation to about 1/weight of the soft tissue's pull (measured in
 # docs/DESIGN.md); large weights only touch the small dense bone block.
-BONE_ACAP_WEIGHT = 100.0
+BONE_ACAP_WEIGHT = 1e4
 
 
 @dataclass
@@ -181,8 +181,9 @@ class Scene:
 
     def joints(self) -> list:
         """Joints detected from vertices shared by two bones: one shared vertex is
-        a ball joint (``centre``), two a hinge (``axis`` through ``centre``), more
-        a rigid weld. Returns dicts with bones, kind, vertices, centre, axis."""
+        a ball joint (``centre``), two or more on one line a hinge (``axis``
+        through ``centre``), more not on a line a rigid weld. Returns dicts with
+        bones, kind, vertices, centre, axis."""
         bones = [p for p in self.parts.values() if p.kind == "bone"]
         verts = {b.name: np.unique(self.tets[b.tets].ravel()) for b in bones}
         out = []
@@ -192,10 +193,7 @@ class Scene:
                 if len(shared) == 0:
                     continue
                 p = self.points[shared]
-                kind = {1: "ball", 2: "hinge"}.get(len(shared), "weld")
-                axis = None
-                if kind == "hinge":
-                    axis = (p[1] - p[0]) / np.linalg.norm(p[1] - p[0])
+                kind, axis = _joint_kind(p, self.points)
                 out.append({"bones": (a.name, b.name), "kind": kind, "vertices": shared,
                             "centre": p.mean(axis=0), "axis": axis})
         return out
@@ -402,6 +400,18 @@ class Scene:
     def __repr__(self):
         parts = ", ".join(f"{p.name} ({p.kind}, {len(p.tets)} tets)" for p in self.parts.values())
         return f"Scene({len(self.points)} vertices, {len(self.tets)} tets; {parts}; {len(self.pinned)} pinned)"
+
+
+def _joint_kind(p: np.ndarray, all_points: np.ndarray) -> tuple:
+    """("ball" | "hinge" | "weld", unit axis or None) of shared joint vertices p."""
+    diag = float(np.linalg.norm(all_points.max(0) - all_points.min(0)))
+    if len(p) == 1:
+        return "ball", None
+    c = p - p.mean(axis=0)
+    _, sv, vt = np.linalg.svd(c, full_matrices=False)
+    if len(sv) > 1 and sv[1] > 1e-6 * diag:
+        return "weld", None
+    return "hinge", vt[0] * (1.0 if vt[0][np.argmax(np.abs(vt[0]))] > 0 else -1.0)
 
 
 def default_tendon_weight(stiffness_ratio: float) -> float:

@@ -1,0 +1,61 @@
+"""Measuring bones in a solution: the rigid motion that best explains where a
+bone's vertices went, its turn about an axis, and how rigid it stayed."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["BoneMotion", "rigid_fit", "bone_motion", "signed_angle"]
+
+
+@dataclass
+class BoneMotion:
+    R: np.ndarray        # (3, 3) rotation
+    t: np.ndarray        # (3,) translation: x = R X + t
+    angle_deg: float     # rotation angle (unsigned)
+    rigidity: float      # largest vertex distance from the rigid fit / bone's bounding-box diagonal
+
+
+def rigid_fit(X: np.ndarray, Y: np.ndarray) -> tuple:
+    """(R, t) minimising sum |R X_i + t - Y_i|^2 over rotations (Kabsch).
+
+    X, Y  (n, 3) matching point sets, n >= 3 not collinear for a unique R
+    """
+    X, Y = np.asarray(X, float), np.asarray(Y, float)
+    if X.shape != Y.shape or X.ndim != 2 or X.shape[1] != 3:
+        raise ValueError(f"need two (n, 3) point arrays of equal shape, got {X.shape} and {Y.shape}")
+    xc, yc = X.mean(axis=0), Y.mean(axis=0)
+    U, _, Vt = np.linalg.svd((X - xc).T @ (Y - yc))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return R, yc - R @ xc
+
+
+def bone_motion(scene, positions, bone: str) -> BoneMotion:
+    """The rigid motion of ``bone`` from rest to ``positions`` ((n, 3) or a Solution)."""
+    part = scene.parts.get(bone)
+    if part is None or part.kind != "bone":
+        bones = [p.name for p in scene.parts.values() if p.kind == "bone"]
+        raise ValueError(f"no bone named {bone!r} (bones: {', '.join(bones) or 'none'})")
+    P = np.asarray(getattr(positions, "positions", positions))
+    v = np.unique(scene.tets[part.tets].ravel())
+    X, Y = scene.points[v], P[v]
+    R, t = rigid_fit(X, Y)
+    diag = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0)))
+    rig = float(np.linalg.norm(X @ R.T + t - Y, axis=1).max() / diag)
+    ang = float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+    return BoneMotion(R=R, t=t, angle_deg=ang, rigidity=rig)
+
+
+def signed_angle(R: np.ndarray, axis) -> float:
+    """The turn of rotation R about ``axis`` in degrees (right-hand rule), from
+    its rotation vector projected on the axis."""
+    a = np.asarray(axis, float)
+    a = a / np.linalg.norm(a)
+    ang = np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    n = np.linalg.norm(w)
+    if n < 1e-15:
+        return float(np.degrees(ang)) if ang < 1.0 else 180.0
+    return float(np.degrees(ang) * (w / n) @ a)

@@ -1,0 +1,23 @@
+"""Built-in scenes, made procedurally (no files): the arm of ``emu demo``."""
+from __future__ import annotations
+
+from .meshes import arm as arm_mesh
+from .scene import Scene
+
+__all__ = ["arm"]
+
+
+def arm(resolution: int = 2, *, forearm_fixed: bool = False, muscle_youngs: float = 6e4,
+        max_activation: float = 1e5) -> Scene:
+    """Two bones on a hinged elbow (see emu.meshes.arm): the humerus fixed, the
+    forearm moved by a flexor and an extensor (Laplace fibres between each
+    muscle's two attachments). The elbow axis is +z through the origin:
+    flexion is a positive turn about it."""
+    m = arm_mesh(resolution)
+    s = Scene(m.points, m.tets)
+    s.add_bone("humerus", m.parts["humerus"])
+    s.add_bone("forearm", m.parts["forearm"], fixed=forearm_fixed)
+    s.add_muscle("flexor", m.parts["flexor"], youngs=muscle_youngs, max_activation=max_activation)
+    s.add_muscle("extensor", m.parts["extensor"], youngs=muscle_youngs, max_activation=max_activation)
+    s.resolve_fibers()
+    return s

@@ -1,0 +1,160 @@
+"""Bones moved by the muscles: rigid bodies on joints, in both solvers."""
+import numpy as np
+import pytest
+
+import emu
+from emu.bones import bone_motion, signed_angle
+from emu.scenes import arm
+from conftest import SHARED_DATA
+
+
+def hinge_vertices(scene, a, b):
+    (j,) = [j for j in scene.joints() if set(j["bones"]) == {a, b}]
+    return j
+
+
+@pytest.fixture(scope="module")
+def small_arm():
+    return arm(1)
+
+
+def test_arm_joint_is_detected_as_a_hinge(small_arm):
+    j = hinge_vertices(small_arm, "humerus", "forearm")
+    assert j["kind"] == "hinge" and len(j["vertices"]) >= 2
+    np.testing.assert_allclose(np.abs(j["axis"]), [0, 0, 1], atol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["fem", "emu"])
+def test_flexor_bends_and_extensor_straightens_the_elbow(small_arm, method):
+    s = small_arm
+    j = hinge_vertices(s, "humerus", "forearm")
+    solver = emu.Solver(s, method)
+    turns = {}
+    for muscle in ("flexor", "extensor"):
+        sol = solver.solve({muscle: 0.3}, normalized=True)
+        assert sol.converged, sol.status
+        bm = bone_motion(s, sol, "forearm")
+        turns[muscle] = signed_angle(bm.R, [0, 0, 1])
+        # the hinge vertices stay put, the forearm turns about them and stays rigid
+        np.testing.assert_allclose(sol.positions[j["vertices"]], s.points[j["vertices"]], atol=1e-9)
+        assert bm.rigidity < 1e-6
+        hum = np.unique(s.tets[s.parts["humerus"].tets].ravel())
+        np.testing.assert_array_equal(sol.positions[hum], s.points[hum])
+    assert turns["flexor"] > 5.0 and turns["extensor"] < -1.0, turns
+
+
+def test_fem_rigid_bone_equilibrium_is_the_minimum_over_scripted_angles(small_arm):
+    """Independent check of the rigid-bone Newton: the same scene with the
+    forearm scripted (fixed, posed by pins) at angles around FEM's answer has
+    its lowest energy there."""
+    s = small_arm
+    act = {"flexor": 0.3}
+    free = emu.Solver(s, "fem", rtol_grad=1e-9).solve(act, normalized=True)
+    theta = signed_angle(bone_motion(s, free, "forearm").R, [0, 0, 1])
+    scripted = arm(1, forearm_fixed=True)
+    solver = emu.Solver(scripted, "fem", rtol_grad=1e-9)
+
+    def energy(deg):
+        sol = solver.solve(act, normalized=True, bone_poses={"forearm": emu.pose_about([0, 0, 1], deg, [0, 0, 0])})
+        assert sol.converged, sol.status
+        return sol.energy, sol
+
+    E0, sol0 = energy(theta)
+    # the scripted solve at FEM's angle lands on FEM's positions and energy
+    np.testing.assert_allclose(sol0.positions, free.positions, atol=1e-7)
+    np.testing.assert_allclose(E0, free.energy, rtol=1e-9)
+    for d in (-0.5, 0.5):
+        assert energy(theta + d)[0] > E0
+
+
+def test_emu_bone_derivatives_match_finite_differences(small_arm):
+    s = small_arm
+    solver = emu.Solver(s, "emu", alpha=100)
+    core = solver._core
+    load = solver.load_case({"flexor": 0.5, "extensor": 0.2}, normalized=True, gravity=[0, -9.81, 0])
+    nu = core.num_unknowns
+    assert nu == (core.unknown_of_tet.max() + 1)
+    rng = np.random.default_rng(3)
+    F = np.tile(np.eye(3).ravel(), (nu, 1)) + 0.02 * rng.standard_normal((nu, 9))
+    for only_bone in (False, True):
+        D = rng.standard_normal((nu, 9))
+        if only_bone:
+            D[:-1] = 0.0  # the bone is the last unknown
+        g = core.gradient(load, F)
+        h = 1e-6
+        fd = (core.energy(load, F + h * D) - core.energy(load, F - h * D)) / (2 * h)
+        assert abs(fd - np.sum(g * D)) <= 1e-6 * abs(fd) + 1e-9
+        Hd = core.hessian_product(load, F, D, True)
+        fdH = (core.gradient(load, F + h * D) - core.gradient(load, F - h * D)) / (2 * h)
+        assert np.abs(fdH - Hd).max() <= 1e-5 * np.abs(fdH).max()
+
+
+def test_emu_and_fem_agree_on_the_arm_as_alpha_grows(small_arm):
+    s = small_arm
+    fem = emu.Solver(s, "fem").solve({"flexor": 0.3}, normalized=True)
+    theta = signed_angle(bone_motion(s, fem, "forearm").R, [0, 0, 1])
+    errs = []
+    for alpha in (30, 300, 3000):
+        sol = emu.Solver(s, "emu", alpha=alpha).solve({"flexor": 0.3}, normalized=True)
+        assert sol.converged, sol.status
+        errs.append(abs(signed_angle(bone_motion(s, sol, "forearm").R, [0, 0, 1]) - theta))
+    assert errs[2] < errs[0] and errs[2] < 0.1, errs
+
+
+def test_simple_joint_free_bone_emu_vs_fem():
+    """The shared scene: contracting the muscle turns the free bottom bone about
+    the hinge edge; EMU's angle is within 2 degrees of FEM's (README)."""
+    path = SHARED_DATA / "simple_joint" / "simple_joint.vtu"
+    s = emu.io.load_scene(path, free_bones=["bottom_bone"], warn=False)
+    hinge = [2450, 2451]
+    angles = {}
+    for method in ("fem", "emu"):
+        sol = emu.Solver(s, method).solve({"muscle": 1e4})
+        assert sol.converged, sol.status
+        bm = bone_motion(s, sol, "bottom_bone")
+        np.testing.assert_allclose(sol.positions[hinge], s.points[hinge], atol=1e-9)
+        assert bm.rigidity < 1e-6, bm.rigidity
+        angles[method] = bm.angle_deg
+    assert 40 < angles["fem"] < 80, angles      # it really swings (about 60 degrees)
+    assert abs(angles["emu"] - angles["fem"]) < 2.0, angles
+
+
+def test_movable_bone_errors(small_arm):
+    s = small_arm
+    with pytest.raises(ValueError, match="moved by the muscles"):
+        emu.solve(s, {}, "fem", bone_poses={"forearm": (np.eye(3), np.zeros(3))})
+    # a movable bone welded to the fixed one by a face
+    m = emu.meshes.block_mesh({"a": [(0, 0)], "b": [(1, 0)], "m": [(0, 1), (1, 1)]}, 1)
+    pts, tets, lab = m
+    w = emu.Scene(pts, tets)
+    w.add_bone("a", lab == 0)
+    w.add_bone("b", lab == 1, fixed=False)
+    w.add_muscle("m", lab == 2, [1, 0, 0])
+    with pytest.raises(ValueError, match="weld"):
+        emu.Solver(w, "fem")
+
+
+def test_joint_between_two_movable_bones(small_arm):
+    """EMU handles a chain (the joint as constraint rows); the FEM reference says
+    it does not, naming the bones."""
+    pts, tets, lab = emu.meshes.block_mesh(
+        {"a": [(0, 0)], "b": [(1, 1)], "c": [(2, 2)], "m1": [(0, 1)], "m2": [(1, 2)], "m3": [(2, 1), (1, 0)]}, 1)
+    s = emu.Scene(pts, tets)
+    s.add_bone("a", lab == 0)
+    s.add_bone("b", lab == 1, fixed=False)
+    s.add_bone("c", lab == 2, fixed=False)
+    for i, name in enumerate(("m1", "m2", "m3")):
+        s.add_muscle(name, lab == 3 + i, [1, 1, 0])
+    kinds = {tuple(sorted(j["bones"])): j["kind"] for j in s.joints()}
+    assert kinds[("a", "b")] == "hinge" and kinds[("b", "c")] == "hinge"
+    with pytest.raises(ValueError, match="two movable bones"):
+        emu.Solver(s, "fem")
+    sol = emu.Solver(s, "emu").solve({"m1": 0.2, "m2": 0.2}, normalized=True)
+    assert sol.converged, sol.status
+    jb = [j for j in s.joints() if set(j["bones"]) == {"b", "c"}][0]["vertices"]
+    for bone in ("b", "c"):
+        assert bone_motion(s, sol, bone).rigidity < 1e-5
+    # the shared hinge vertices sit where both bones put them
+    for bone in ("b", "c"):
+        bm = bone_motion(s, sol, bone)
+        np.testing.assert_allclose(s.points[jb] @ bm.R.T + bm.t, sol.positions[jb], atol=1e-5)
