@@ -10,7 +10,7 @@ from . import _core
 from .scene import Scene, Part, MeshWarning, lame
 from .solve import Solver, Solution, pose_about, rotation, solve
 from .bones import bone_motion, rigid_fit, signed_angle
-from . import activation, bones, fibers, io, meshes, run, scenefile
+from . import activation, bones, fibers, io, meshes, run, scenefile, scenes
 
 __version__ = "0.1.0"
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BoneMotion", "rigid_fit", "bone_motion", "signed_angle"]
+__all__ = ["BoneMotion", "rigid_fit", "bone_motion", "signed_angle", "bone_angle"]
 
 
 @dataclass
@@ -59,3 +59,13 @@ def signed_angle(R: np.ndarray, axis) -> float:
     if n < 1e-15:
         return float(np.degrees(ang)) if ang < 1.0 else 180.0
     return float(np.degrees(ang) * (w / n) @ a)
+
+
+def bone_angle(scene, positions, bone: str) -> float:
+    """A bone's turn in degrees: signed about its hinge axis (see Scene.joints)
+    if it has a hinge, else the unsigned rotation angle."""
+    bm = bone_motion(scene, positions, bone)
+    for j in scene.joints():
+        if bone in j["bones"] and j["kind"] == "hinge":
+            return signed_angle(bm.R, j["axis"])
+    return bm.angle_deg

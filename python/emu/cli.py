@@ -1,6 +1,7 @@
 """The ``emu`` command line.
 
-    emu demo [--out DIR] [--tets N] [--threads T] [--woodbury]
+    emu demo [--out DIR] [--resolution R] [--frames N] [--alpha A] [--no-fem] [--threads T]
+    emu compare [--out DIR] [--tets N] [--threads T] [--woodbury]
     emu solve MESH --activation NAME=A [NAME=A ...] [--method emu|fem] [--out FILE.vtu]
     emu run SCENE.toml [--out DIR]
     emu info [MESH]
@@ -49,7 +50,9 @@ def _print_info(args):
         bones = [p.name for p in scene.parts.values() if p.kind == "bone"]
         if bones:
             scripted = set(spec.bones) if spec is not None else set()
-            desc = ", ".join(f"{b} ({'scripted' if b in scripted else 'fixed'})" for b in bones)
+            movable = set(scene.movable_bones)
+            desc = ", ".join(f"{b} ({'moved by the muscles' if b in movable else 'scripted' if b in scripted else 'fixed'})"
+                             for b in bones)
             print(f"  bones: {desc}")
             for j in scene.joints():
                 where = f"vertices {j['vertices'].tolist()}" if len(j["vertices"]) <= 4 else \
@@ -72,6 +75,19 @@ def _print_info(args):
 
 def _demo(args):
     import emu
+    from .demo import run_demo
+
+    if args.threads:
+        emu._core.set_threads(args.threads)
+    if args.resolution < 1 or args.frames < 2:
+        raise ValueError("--resolution must be >= 1 and --frames >= 2")
+    summary = run_demo(args.out, resolution=args.resolution, frames=args.frames, alpha=args.alpha,
+                       compare_fem=not args.no_fem)
+    return 0 if summary["all_converged"] else 1
+
+
+def _compare(args):
+    import emu
     from emu.meshes import fusiform
 
     if args.threads:
@@ -84,7 +100,7 @@ def _demo(args):
     scene.pin(m.proximal)
     act = {"belly": args.activation}
     info = emu.info()
-    print(f"emu demo: fusiform muscle, {len(scene.tets)} tets ({len(scene.parts['belly'].tets)} muscle, "
+    print(f"emu compare: fusiform muscle, {len(scene.tets)} tets ({len(scene.parts['belly'].tets)} muscle, "
           f"{len(scene.parts['tendons'].tets)} tendon), {len(scene.points)} vertices, proximal end pinned")
     print(f"activation a = {args.activation:g} on the belly; threads {info['omp_threads']}; BLAS {info['config']}")
     runs = [("fem", {})]
@@ -170,14 +186,23 @@ def _run(args):
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="emu", description="EMU muscle simulation (and its FEM reference)")
     sub = ap.add_subparsers(dest="cmd", required=True)
-    d = sub.add_parser("demo", help="contract the built-in fusiform muscle with FEM and EMU, write VTU")
+    d = sub.add_parser("demo", help="the built-in arm: a flexor then an extensor swing the forearm about the "
+                                    "elbow; frames, PNG contact sheet, angle plot, EMU vs FEM")
     d.add_argument("--out", default="emu_out", help="output folder (default: emu_out)")
+    d.add_argument("--resolution", type=int, default=3, help="cells per arm block (default 3: 6.2k tets)")
+    d.add_argument("--frames", type=int, default=25, help="frames over the 2 s sequence (default 25)")
+    d.add_argument("--alpha", type=float, default=100.0, help="EMU alpha relative to the muscles' shear modulus")
+    d.add_argument("--no-fem", action="store_true", help="skip the FEM reference solves")
+    d.add_argument("--threads", type=int, default=None)
+    d.set_defaults(func=_demo)
+    d = sub.add_parser("compare", help="contract a fusiform muscle with FEM and EMU at one activation, write VTU")
+    d.add_argument("--out", default="emu_compare", help="output folder (default: emu_compare)")
     d.add_argument("--tets", type=int, default=8000, help="approximate tet count (default 8000)")
     d.add_argument("--activation", type=float, default=5e4, help="absolute activation a (default 5e4)")
     d.add_argument("--alpha", type=float, default=100.0, help="EMU alpha relative to the muscle's shear modulus")
     d.add_argument("--threads", type=int, default=None)
     d.add_argument("--woodbury", action="store_true", help="also run the paper's Woodbury quasi-Newton step")
-    d.set_defaults(func=_demo)
+    d.set_defaults(func=_compare)
     s = sub.add_parser("solve", help="solve a labelled mesh (fixed bones pinned) at one activation")
     s.add_argument("mesh")
     s.add_argument("--activation", nargs="*", help="NAME=VALUE absolute activations")

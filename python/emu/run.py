@@ -27,8 +27,9 @@ def write_pvd(path, entries):
         f.write("\n".join(lines))
 
 
-def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print) -> dict:
-    """Solve every frame of a scene file, warm-starting each from the last."""
+def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_frame=None) -> dict:
+    """Solve every frame of a scene file, warm-starting each from the last.
+    on_frame(k, solution) is called after each frame (e.g. to keep positions)."""
     import emu
 
     out = out_dir or spec.output["dir"]
@@ -54,12 +55,16 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print) -> di
             if faces is not None:
                 write_obj(os.path.join(out, name + ".obj"), sol.positions, faces)
             angles = {name: curve.value(k, k * spec.dt) for name, (_, _, curve) in spec.bones.items()}
+            for name in spec.scene.movable_bones:
+                angles[name] = emu.bones.bone_angle(spec.scene, sol.positions, name)
             log["frames"].append({"frame": k, "time": k * spec.dt, "activation": act,
                                   "bone_angles_deg": angles, "converged": sol.converged,
                                   "status": sol.status, "iterations": sol.iterations,
                                   "cg_iterations": sol.cg_iterations, "energy": sol.energy,
                                   "rel_grad_norm": sol.grad_norm / sol.grad_norm0 if sol.grad_norm0 else 0.0,
                                   "solve_s": sol.time_s})
+            if on_frame is not None:
+                on_frame(k, sol)
             elapsed = time.perf_counter() - t_start
             left = elapsed / (k + 1) * (spec.frames - k - 1)
             flag = "" if sol.converged else f"  NOT converged: {sol.status}"

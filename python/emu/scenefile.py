@@ -1,12 +1,15 @@
 """Scene files (TOML or JSON): one documented schema, a typed loader, clear errors.
 
     pins = ["proximal"]          # top level (before any [table] in TOML): named sets and/or
-                                 # vertex ids (files: bones are fixed anyway)
+                                 # vertex ids
     gravity = [0.0, 0.0, 0.0]
 
-    [mesh]                       # exactly one of: path = "file.vtu" | [mesh.fusiform]
+    [mesh]                       # exactly one of: path = "file.vtu" | [mesh.fusiform] | [mesh.arm]
     path = "../shared/data/big_muscle/big_muscle.vtu"   # relative to the scene file
     fibers = "file"              # muscles' fibres: "file" (cell data) or "laplace" (between attachments)
+    [mesh.arm]                   # the procedural arm of `emu demo`: bones "humerus" (fixed) and
+    resolution = 2               # "forearm" (moved by the muscles) on a hinge, muscles "flexor"
+                                 # and "extensor" (Laplace fibres)
     [mesh.fusiform]              # the procedural muscle: parts "belly" and "tendons",
     tets = 5000                  # pin sets "proximal" and "distal"
     length = 10.0
@@ -40,7 +43,11 @@
     interpolation = "smooth"     # "linear", "smooth" or "step"
     normalized = true            # values in [0, 1] x max_activation; false: absolute a
 
-    [bones.radius]               # a scripted bone (bones are fixed unless scripted):
+    [bones.ulna]                 # a bone the muscles move (rigid, turning about its joints)
+    fixed = false
+    acap_weight = 1e4            # EMU's ACAP weight on its tets (rigidity of the fitted positions)
+
+    [bones.radius]               # a scripted bone (fixed bones, the default, may be scripted):
     axis = [0.0, 0.0, 1.0]       # rotation axis through `center`, angle keyframes in degrees
     center = [0.0, 0.0, 0.0]
     angle = [[0.0, 0.0], [1.0, 30.0]]
@@ -72,19 +79,22 @@ class SceneFileError(ValueError):
 _SCHEMA = {
     "mesh": {"path": str, "fibers": str, "fusiform": {"tets": int, "resolution": int, "length": float,
                                                      "radius": float, "end_radius": float,
-                                                     "tendon_fraction": float}},
+                                                     "tendon_fraction": float},
+             "arm": {"resolution": int}},
     "materials": "table of tables",
     "pins": list,
     "gravity": list,
     "solver": {"method": str, "alpha": float, "modes": int, "step": str, "rtol_grad": float,
                "rtol_energy": float, "max_iterations": int, "cg_max_iterations": int, "preconditioner": str,
-               "preconditioner_refresh": int, "exact_when_definite": bool, "threads": int},
+               "preconditioner_refresh": int, "exact_when_definite": bool, "threads": int,
+               "bone_coarse_space": bool},
     "frames": {"count": int, "dt": float},
     "activation": "table of tables",
     "bones": "table of tables",
     "output": {"dir": str, "vtu": bool, "obj": bool},
 }
-_BONE_KEYS = {"axis": list, "center": list, "angle": list, "interpolation": str}
+_BONE_KEYS = {"fixed": bool, "acap_weight": float, "axis": list, "center": list, "angle": list,
+              "interpolation": str}
 _MATERIAL_KEYS = {"youngs": float, "poisson": float, "density": float, "max_activation": float,
                   "acap_weight": float}
 _CURVE_KEYS = {"keys": list, "per_frame": list, "interpolation": str, "normalized": bool}
@@ -176,8 +186,8 @@ def load_scene_file(path) -> SceneSpec:
     mesh = data.get("mesh")
     if mesh is None:
         raise SceneFileError("missing [mesh] table (mesh.path or [mesh.fusiform])")
-    if ("path" in mesh) == ("fusiform" in mesh):
-        raise SceneFileError("[mesh] needs exactly one of 'path' or [mesh.fusiform]")
+    if sum(k in mesh for k in ("path", "fusiform", "arm")) != 1:
+        raise SceneFileError("[mesh] needs exactly one of 'path', [mesh.fusiform] or [mesh.arm]")
     named_pins = {}
     if "path" in mesh:
         mpath = mesh["path"] if os.path.isabs(mesh["path"]) else os.path.join(base, mesh["path"])
@@ -187,6 +197,8 @@ def load_scene_file(path) -> SceneSpec:
         if fib not in ("file", "laplace"):
             raise SceneFileError(f"mesh.fibers must be 'file' or 'laplace', got {fib!r}")
         scene = emu.io.load_scene(mpath, fibers=fib)
+    elif "arm" in mesh:
+        scene = emu.scenes.arm(**dict(mesh["arm"]))
     else:
         fz = dict(mesh["fusiform"])
         m = emu.meshes.fusiform(**fz)
@@ -246,9 +258,21 @@ def load_scene_file(path) -> SceneSpec:
             known = [p.name for p in scene.parts.values() if p.kind == "bone"]
             raise SceneFileError(f"bones.{name}: no bone named '{name}' (bones: {', '.join(known) or 'none'})")
         _check_table(spec, _BONE_KEYS, f"bones.{name}")
+        if "fixed" in spec:
+            part.fixed = bool(spec["fixed"])
+        if "acap_weight" in spec:
+            if not spec["acap_weight"] > 0:
+                raise SceneFileError(f"bones.{name}.acap_weight must be positive, got {spec['acap_weight']!r}")
+            part.acap_weight = float(spec["acap_weight"])
+        scripted = [k for k in ("axis", "center", "angle") if k in spec]
+        if not scripted:
+            continue
+        if not part.fixed:
+            raise SceneFileError(f"bones.{name}: a bone moved by the muscles (fixed = false) cannot be scripted "
+                                 f"({', '.join(scripted)} given)")
         for key in ("axis", "center", "angle"):
             if key not in spec:
-                raise SceneFileError(f"bones.{name}: missing '{key}'")
+                raise SceneFileError(f"bones.{name}: missing '{key}' (a scripted bone needs axis, center, angle)")
         for key in ("axis", "center"):
             v = spec[key]
             if len(v) != 3 or not all(_type_ok(x, float) for x in v):

@@ -9,12 +9,16 @@ import numpy as np
 _FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 
 
-def boundary_faces(tets: np.ndarray) -> np.ndarray:
-    """Triangles that belong to exactly one tet, outward-oriented: (f, 3)."""
+def boundary_faces(tets: np.ndarray, return_tets: bool = False):
+    """Triangles that belong to exactly one tet, outward-oriented: (f, 3)
+    (and, with return_tets, the tet of each: (f,))."""
     faces = tets[:, _FACES].reshape(-1, 3)
     key = np.sort(faces, axis=1)
     _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return faces[counts[inverse.ravel()] == 1]
+    on = counts[inverse.ravel()] == 1
+    if return_tets:
+        return faces[on], np.repeat(np.arange(len(tets)), 4)[on]
+    return faces[on]
 
 
 def write_obj(path, points: np.ndarray, faces: np.ndarray):

@@ -1,0 +1,116 @@
+"""Figures of a run, rendered off-screen with matplotlib (Agg): a contact sheet
+of frames and a plot of joint angle and activation over time.
+
+matplotlib is the one plotting dependency: it renders headless with no GPU or
+display, and every user's Python has it or gets it from pip (README)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .surface import boundary_faces
+
+__all__ = ["contact_sheet", "angle_activation_plot"]
+
+PART_COLOURS = {"bone": (0.93, 0.90, 0.80), "tendon": (0.85, 0.85, 0.95), "muscle": (0.80, 0.35, 0.35)}
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _face_colours(scene, faces_tet, activation_of_tet):
+    kinds = np.empty(len(scene.tets), object)
+    for p in scene.parts.values():
+        kinds[p.tets] = p.kind
+    col = np.array([PART_COLOURS[k] for k in kinds[faces_tet]])
+    a = activation_of_tet[faces_tet]
+    muscle = kinds[faces_tet] == "muscle"
+    # muscles from pale (relaxed) to deep red (fully active)
+    pale = np.array([0.93, 0.75, 0.72])
+    deep = np.array([0.70, 0.05, 0.05])
+    col[muscle] = pale + np.clip(a[muscle], 0, 1)[:, None] * (deep - pale)
+    return col
+
+
+def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0, 1), columns=4):
+    """Draw solved frames side by side, looking along the axis not in ``view``.
+
+    frames       list of (n, 3) positions
+    titles       one string per frame
+    activations  one {muscle: normalised activation} per frame (muscle colour)
+    view         the two coordinate axes on the picture plane (default x, y)
+    """
+    plt = _pyplot()
+    from matplotlib.collections import PolyCollection
+
+    faces, faces_tet = boundary_faces(scene.tets, return_tets=True)
+    depth_axis = ({0, 1, 2} - set(view)).pop()
+    n = len(frames)
+    cols = min(columns, n)
+    rows = (n + cols - 1) // cols
+    allp = np.concatenate([np.asarray(f)[:, list(view)] for f in frames])
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    pad = 0.05 * (hi - lo).max()
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 3.2 * rows), squeeze=False)
+    muscles = scene.muscles
+    for i, ax in enumerate(axes.ravel()):
+        ax.set_axis_off()
+        if i >= n:
+            continue
+        P = np.asarray(frames[i])
+        act_tet = np.zeros(len(scene.tets))
+        for name, v in (activations[i] if activations else {}).items():
+            if name in muscles:
+                act_tet[scene.parts[name].tets] = v
+        tri = P[faces]
+        # faces towards the viewer, painted back to front (depth-sorted)
+        e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        nrm = np.cross(e1, e2)[:, depth_axis] * (1 if view == (0, 1) else -1)
+        keep = np.flatnonzero(nrm > 0)
+        order = keep[np.argsort(tri[keep, :, depth_axis].mean(axis=1))]
+        poly = tri[order][:, :, list(view)]
+        col = _face_colours(scene, faces_tet[order], act_tet)
+        ax.add_collection(PolyCollection(poly, facecolors=col, edgecolors=(0, 0, 0, 0.15), linewidths=0.2))
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        ax.set_aspect("equal")
+        if titles:
+            ax.set_title(titles[i], fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def angle_activation_plot(path, times, angles: dict, activations: dict, *, reference: dict | None = None,
+                          title: str = ""):
+    """Joint angles (degrees) above, activations (normalised) below, against time.
+
+    angles       {label: (frames,) degrees}
+    activations  {muscle: (frames,) normalised activation}
+    reference    {label: (frames,) degrees} drawn dashed (e.g. the FEM reference)
+    """
+    plt = _pyplot()
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    for label, v in angles.items():
+        a1.plot(times, v, "-o", ms=3, label=label)
+    for label, v in (reference or {}).items():
+        a1.plot(times, v, "--", color="k", lw=1, label=label)
+    a1.set_ylabel("joint angle (degrees)")
+    a1.axhline(0, color="0.7", lw=0.5)
+    a1.legend(fontsize=8)
+    for name, v in activations.items():
+        a2.plot(times, v, "-", label=name)
+    a2.set_ylabel("activation (normalised)")
+    a2.set_xlabel("time (s)")
+    a2.set_ylim(-0.05, 1.05)
+    a2.legend(fontsize=8)
+    if title:
+        a1.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
