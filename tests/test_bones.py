@@ -158,3 +158,81 @@ def test_joint_between_two_movable_bones(small_arm):
     for bone in ("b", "c"):
         bm = bone_motion(s, sol, bone)
         np.testing.assert_allclose(s.points[jb] @ bm.R.T + bm.t, sol.positions[jb], atol=1e-5)
+
+
+# ------------------------------------------------------------- ball joint
+def test_head_on_a_ball_joint_emu_vs_fem():
+    s = emu.scenes.neck(1)
+    (j,) = s.joints()
+    assert j["kind"] == "ball" and len(j["vertices"]) == 1
+    res = {}
+    for method in ("fem", "emu"):
+        sol = emu.Solver(s, method).solve({"left_front": 0.4}, normalized=True)
+        assert sol.converged, sol.status
+        np.testing.assert_allclose(sol.positions[j["vertices"]], s.points[j["vertices"]], atol=1e-12)
+        bm = bone_motion(s, sol, "head")
+        assert bm.rigidity < 1e-6
+        w = np.array([bm.R[2, 1] - bm.R[1, 2], bm.R[0, 2] - bm.R[2, 0], bm.R[1, 0] - bm.R[0, 1]])
+        res[method] = (bm.angle_deg, w / np.linalg.norm(w))
+    # the left-front muscle tips the head down towards the left front: about the axis (-1, -1, .)/sqrt 2
+    angle, axis = res["fem"]
+    assert angle > 3 and axis @ np.array([-1, -1, 0]) / np.sqrt(2) > 0.9, res
+    assert abs(res["emu"][0] - angle) < 1.5 and res["emu"][1] @ axis > 0.99, res
+
+
+# ------------------------------------------------------------- scene files and the demo
+def test_scene_file_movable_bones(tmp_path):
+    from emu.scenefile import SceneFileError, load_scene_file
+
+    base = "[mesh.arm]\nresolution = 1\n[frames]\ncount = 2\n[activation.flexor]\nkeys = [[0.0, 0.0], [1.0, 0.3]]\n"
+    p = tmp_path / "arm.toml"
+    p.write_text(base)
+    spec = load_scene_file(p)
+    assert spec.scene.movable_bones == ["forearm"]
+    p.write_text(base + "[bones.forearm]\nfixed = true\n")
+    assert load_scene_file(p).scene.movable_bones == []
+    p.write_text(base + "[bones.forearm]\nacap_weight = 50.0\n")
+    assert load_scene_file(p).scene.parts["forearm"].acap_weight == 50.0
+    for extra, match in [
+        ("[bones.forearm]\nangle = [[0.0, 10.0]]\naxis = [0, 0, 1]\ncenter = [0, 0, 0]\n", "cannot be scripted"),
+        ("[bones.forearm]\nacap_weight = -1.0\n", "acap_weight must be positive"),
+        ("[bones.forearm]\nfixed = 1\n", "'bones.forearm.fixed' must be bool"),
+        ("[bones.humerus]\nangle = [[0.0, 10.0]]\n", "missing 'axis'"),
+        ("[bones.ulna]\nfixed = false\n", "no bone named 'ulna'"),
+    ]:
+        p.write_text(base + extra)
+        with pytest.raises(SceneFileError, match=match):
+            load_scene_file(p)
+    p.write_text(base.replace("resolution = 1", "resolution = 0"))
+    with pytest.raises(SceneFileError, match="resolution must be >= 1"):
+        load_scene_file(p)
+    p.write_text(base.replace("[mesh.arm]", "[mesh.neck]").replace("flexor", "left_back"))
+    assert load_scene_file(p).scene.movable_bones == ["head"]
+
+
+def test_emu_demo_end_to_end(tmp_path):
+    import json
+    import subprocess
+    import sys
+    import xml.etree.ElementTree as ET
+
+    import meshio
+
+    out = tmp_path / "demo"
+    r = subprocess.run([sys.executable, "-m", "emu.cli", "demo", "--resolution", "1", "--frames", "5",
+                        "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    for name in ("contact_sheet.png", "elbow_angle.png"):
+        data = (out / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10000
+    files = [d.attrib["file"] for d in ET.parse(out / "series.pvd").getroot().iter("DataSet")]
+    assert len(files) == 5
+    m = meshio.read(out / files[1])  # t = 0.5 s, the flexor's peak: the forearm has turned
+    assert np.abs(m.point_data["displacement"]).max() > 1e-3
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["all_converged"] and summary["frames"] == 5
+    angles = summary["elbow_angle_deg"]
+    assert angles[1] > 10 and abs(angles[2]) < 0.1 and angles[3] < -3, angles  # flexes, back, extends
+    assert summary["max_angle_difference_deg"] < 3.0
+    log = json.loads((out / "log.json").read_text())
+    assert [f["bone_angles_deg"]["forearm"] for f in log["frames"]] == pytest.approx(angles)

@@ -16,7 +16,7 @@ from itertools import permutations
 
 import numpy as np
 
-__all__ = ["FusiformMesh", "fusiform", "resolution_for_tets", "ArmMesh", "arm", "block_mesh"]
+__all__ = ["FusiformMesh", "fusiform", "resolution_for_tets", "ArmMesh", "arm", "block_mesh", "NeckMesh", "neck"]
 
 ROUNDING = 0.6  # 0: square cross-section, 1: disk (slivers at the corners)
 
@@ -134,8 +134,9 @@ def _kuhn_tets(corner) -> np.ndarray:
 def block_mesh(blocks: dict, resolution: int, size: float = 1.0, depth: int = 1):
     """A conforming tet mesh of unit blocks on an integer grid.
 
-    blocks      {label: list of (i, j) block coordinates}; block (i, j) spans
-                [i, i+1] x [j, j+1] x [0, depth] (times size)
+    blocks      {label: list of (i, j) or (i, j, k) block coordinates}; block (i, j)
+                spans [i, i+1] x [j, j+1] x [0, depth], block (i, j, k)
+                [i, i+1] x [j, j+1] x [k, k+1] (times size)
     resolution  hex cells per block side; each hex is six Kuhn tets, conforming
                 across blocks, so neighbouring blocks share their face vertices
     Returns (points (n, 3), tets (m, 4) positively oriented, labels (m,) index
@@ -144,19 +145,23 @@ def block_mesh(blocks: dict, resolution: int, size: float = 1.0, depth: int = 1)
     r = int(resolution)
     if r < 1:
         raise ValueError(f"resolution must be >= 1, got {resolution}")
-    all_ij = np.array([ij for v in blocks.values() for ij in v])
-    lo = all_ij.min(axis=0)
-    ni, nj = (all_ij.max(axis=0) - lo + 1) * r
-    nk = depth * r
+    def box(ijk):  # (i, j, k0, k1) in blocks
+        return (ijk[0], ijk[1], ijk[2], ijk[2] + 1) if len(ijk) == 3 else (ijk[0], ijk[1], 0, depth)
+
+    boxes = np.array([box(ijk) for v in blocks.values() for ijk in v])
+    lo = np.array([boxes[:, 0].min(), boxes[:, 1].min(), boxes[:, 2].min()])
+    ni, nj = (boxes[:, 0].max() - lo[0] + 1) * r, (boxes[:, 1].max() - lo[1] + 1) * r
+    nk = (boxes[:, 3].max() - lo[2]) * r
 
     def vid(i, j, k):
         return (i * (nj + 1) + j) * (nk + 1) + k
 
     tets, labels = [], []
     for label, (name, cells) in enumerate(blocks.items()):
-        for (bi, bj) in cells:
+        for cell in cells:
+            bi, bj, k0, k1 = box(cell)
             I, J, K = np.meshgrid(np.arange(r) + (bi - lo[0]) * r, np.arange(r) + (bj - lo[1]) * r,
-                                  np.arange(nk), indexing="ij")
+                                  np.arange((k0 - lo[2]) * r, (k1 - lo[2]) * r), indexing="ij")
             I, J, K = I.ravel(), J.ravel(), K.ravel()
             t = _kuhn_tets(lambda di, dj, dk: vid(I + di, J + dj, K + dk))
             tets.append(t)
@@ -164,7 +169,7 @@ def block_mesh(blocks: dict, resolution: int, size: float = 1.0, depth: int = 1)
     tets = np.concatenate(tets).astype(np.int64)
     labels = np.concatenate(labels)
     I, J, K = np.meshgrid(np.arange(ni + 1), np.arange(nj + 1), np.arange(nk + 1), indexing="ij")
-    points = np.stack([(I.ravel() / r + lo[0]), (J.ravel() / r + lo[1]), K.ravel() / r], axis=1) * size
+    points = np.stack([(I.ravel() / r + lo[0]), (J.ravel() / r + lo[1]), K.ravel() / r + lo[2]], axis=1) * size
     used, inverse = np.unique(tets, return_inverse=True)
     tets = inverse.reshape(tets.shape)
     points = points[used]
@@ -211,3 +216,40 @@ def arm(resolution: int = 2, *, block: float = 0.02, length: int = 6) -> ArmMesh
     names = list(blocks)
     parts = {name: np.flatnonzero(labels == i) for i, name in enumerate(names)}
     return ArmMesh(points=points, tets=tets, parts=parts, elbow=np.zeros(3), axis=np.array([0.0, 0.0, 1.0]))
+
+
+@dataclass
+class NeckMesh:
+    points: np.ndarray   # (n, 3) rest positions
+    tets: np.ndarray     # (m, 4)
+    parts: dict          # {"torso" | "head" | four muscles: tet ids}
+    joint: np.ndarray    # the ball joint's position
+
+
+NECK_MUSCLES = ("left_back", "right_back", "left_front", "right_front")
+
+
+def neck(resolution: int = 1, *, block: float = 0.02) -> NeckMesh:
+    """A head on a ball joint moved by four neck muscles (x right, y front, z up):
+
+    - torso: a base plate of 6 x 6 blocks and a spine column of one block up to
+      z = 3 blocks;
+    - head: a 6 x 6 x 2 block slab from z = 4, on a one-block stem whose lowest
+      corner is the spine's top corner: the two bones share that one vertex, a
+      ball joint at (1, 1, 3) blocks, right under the slab's centre;
+    - four muscles: columns from the plate to the head's underside at its
+      corners (left_back, right_back, left_front, right_front).
+
+    123 blocks of 6 resolution^3 tets (resolution 1: 738 tets, 2: 5.9k).
+    """
+    span = range(-2, 4)
+    torso = [(i, j, 0) for i in span for j in span] + [(0, 0, 1), (0, 0, 2)]
+    head = [(1, 1, 3)] + [(i, j, k) for i in span for j in span for k in (4, 5)]
+    cols = {"left_back": (-2, -2), "right_back": (3, -2), "left_front": (-2, 3), "right_front": (3, 3)}
+    blocks = {"torso": torso, "head": head}
+    for name in NECK_MUSCLES:
+        i, j = cols[name]
+        blocks[name] = [(i, j, k) for k in (1, 2, 3)]
+    points, tets, labels = block_mesh(blocks, resolution, size=block)
+    parts = {name: np.flatnonzero(labels == i) for i, name in enumerate(blocks)}
+    return NeckMesh(points=points, tets=tets, parts=parts, joint=np.array([1.0, 1.0, 3.0]) * block)

@@ -4,12 +4,14 @@
                                  # vertex ids
     gravity = [0.0, 0.0, 0.0]
 
-    [mesh]                       # exactly one of: path = "file.vtu" | [mesh.fusiform] | [mesh.arm]
+    [mesh]                       # exactly one of: path = "file.vtu" | [mesh.fusiform] | [mesh.arm] | [mesh.neck]
     path = "../shared/data/big_muscle/big_muscle.vtu"   # relative to the scene file
     fibers = "file"              # muscles' fibres: "file" (cell data) or "laplace" (between attachments)
     [mesh.arm]                   # the procedural arm of `emu demo`: bones "humerus" (fixed) and
     resolution = 2               # "forearm" (moved by the muscles) on a hinge, muscles "flexor"
                                  # and "extensor" (Laplace fibres)
+    [mesh.neck]                  # a head on a ball joint: bones "torso" (fixed) and "head" (moved),
+    resolution = 2               # muscles "left_back", "right_back", "left_front", "right_front"
     [mesh.fusiform]              # the procedural muscle: parts "belly" and "tendons",
     tets = 5000                  # pin sets "proximal" and "distal"
     length = 10.0
@@ -80,7 +82,7 @@ _SCHEMA = {
     "mesh": {"path": str, "fibers": str, "fusiform": {"tets": int, "resolution": int, "length": float,
                                                      "radius": float, "end_radius": float,
                                                      "tendon_fraction": float},
-             "arm": {"resolution": int}},
+             "arm": {"resolution": int}, "neck": {"resolution": int}},
     "materials": "table of tables",
     "pins": list,
     "gravity": list,
@@ -186,8 +188,8 @@ def load_scene_file(path) -> SceneSpec:
     mesh = data.get("mesh")
     if mesh is None:
         raise SceneFileError("missing [mesh] table (mesh.path or [mesh.fusiform])")
-    if sum(k in mesh for k in ("path", "fusiform", "arm")) != 1:
-        raise SceneFileError("[mesh] needs exactly one of 'path', [mesh.fusiform] or [mesh.arm]")
+    if sum(k in mesh for k in ("path", "fusiform", "arm", "neck")) != 1:
+        raise SceneFileError("[mesh] needs exactly one of 'path', [mesh.fusiform], [mesh.arm] or [mesh.neck]")
     named_pins = {}
     if "path" in mesh:
         mpath = mesh["path"] if os.path.isabs(mesh["path"]) else os.path.join(base, mesh["path"])
@@ -197,8 +199,12 @@ def load_scene_file(path) -> SceneSpec:
         if fib not in ("file", "laplace"):
             raise SceneFileError(f"mesh.fibers must be 'file' or 'laplace', got {fib!r}")
         scene = emu.io.load_scene(mpath, fibers=fib)
-    elif "arm" in mesh:
-        scene = emu.scenes.arm(**dict(mesh["arm"]))
+    elif "arm" in mesh or "neck" in mesh:
+        kind = "arm" if "arm" in mesh else "neck"
+        res = int(mesh[kind].get("resolution", 2))
+        if res < 1:
+            raise SceneFileError(f"mesh.{kind}.resolution must be >= 1, got {res}")
+        scene = getattr(emu.scenes, kind)(res)
     else:
         fz = dict(mesh["fusiform"])
         m = emu.meshes.fusiform(**fz)
