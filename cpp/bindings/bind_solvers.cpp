@@ -55,13 +55,16 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("num_muscles", &Model::num_muscles)
       .def_readwrite("bone", &Model::bone, "#T movable-bone id per tet, -1 for soft tissue (empty: no bones)")
       .def_readwrite("num_bones", &Model::num_bones)
+      .def_readwrite("joint_points", &Model::joint_points)
+      .def_readwrite("joint_bones", &Model::joint_bones)
       .def("validate", &Model::validate);
 
   py::class_<LoadCase>(m, "LoadCase")
       .def(py::init<>())
       .def_readwrite("activation", &LoadCase::activation)
       .def_readwrite("pin_positions", &LoadCase::pin_positions)
-      .def_readwrite("gravity", &LoadCase::gravity);
+      .def_readwrite("gravity", &LoadCase::gravity)
+      .def_readwrite("joint_targets", &LoadCase::joint_targets);
 
   py::class_<SolverOptions>(m, "SolverOptions")
       .def(py::init<>())

@@ -69,6 +69,7 @@ class Scene:
         self.pinned = np.zeros(0, np.int64)
         self.pin_targets = np.zeros((0, 3))
         self.gravity = np.zeros(3)
+        self.declared_joints = []   # add_joint: {"bones", "kind", "centre", "axis"}
 
     # ----------------------------------------------------------------- parts
     def _tet_ids(self, name, tets) -> np.ndarray:
@@ -195,8 +196,36 @@ class Scene:
                 p = self.points[shared]
                 kind, axis = _joint_kind(p, self.points)
                 out.append({"bones": (a.name, b.name), "kind": kind, "vertices": shared,
-                            "centre": p.mean(axis=0), "axis": axis})
+                            "centre": p.mean(axis=0), "axis": axis, "declared": False})
+        for j in self.declared_joints:
+            out.append(dict(j, vertices=np.zeros(0, np.int64), declared=True))
         return out
+
+    def add_joint(self, bone: str, other: str, centre, axis=None) -> dict:
+        """Declare a joint between two bones that share no vertex there (meshes
+        whose bones do not touch): a ball joint at ``centre``, or with ``axis`` a
+        hinge about the line through ``centre``. At least one of the bones must
+        be movable (fixed=False); the other may be fixed or scripted."""
+        for name in (bone, other):
+            p = self.parts.get(name)
+            if p is None or p.kind != "bone":
+                known = [q.name for q in self.parts.values() if q.kind == "bone"]
+                raise ValueError(f"add_joint: no bone named {name!r} (bones: {', '.join(known) or 'none'}); "
+                                 "add the bones first")
+        if bone == other:
+            raise ValueError(f"add_joint: a joint needs two different bones, got {bone!r} twice")
+        c = np.asarray(centre, dtype=np.float64)
+        if c.shape != (3,) or not np.all(np.isfinite(c)):
+            raise ValueError(f"add_joint: centre must be a finite 3-vector, got {centre!r}")
+        a = None
+        if axis is not None:
+            a = np.asarray(axis, dtype=np.float64)
+            if a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) == 0:
+                raise ValueError(f"add_joint: axis must be a non-zero finite 3-vector, got {axis!r}")
+            a = a / np.linalg.norm(a)
+        j = {"bones": (bone, other), "kind": "ball" if a is None else "hinge", "centre": c, "axis": a}
+        self.declared_joints.append(j)
+        return j
 
     def split_tendons(self, muscle: str, distance: float, *, name: str | None = None, **tendon_options) -> Part:
         """Move the muscle's tets whose centroid lies within ``distance`` of one of
@@ -332,7 +361,29 @@ class Scene:
             raise ValueError("the scene is not anchored: pin some vertices (scene.pin) or attach the muscles "
                              "to a fixed bone; without an anchor no equilibrium is unique")
         comp = connected_components(len(self.points), self.tets[soft])
-        anchored = np.unique(comp[pins[used[pins]]])
+        # declared joints connect their bones' pieces (or anchor them, to a fixed bone)
+        movable = set(self.movable_bones)
+        piece = {p.name: comp[self.tets[p.tets[0], 0]] for p in self.parts.values()
+                 if p.kind == "bone" and p.name in movable}
+        merged = {c: c for c in np.unique(comp[used])}
+
+        def root(c):
+            while merged[c] != c:
+                c = merged[c]
+            return c
+        extra_anchored = []
+        for j in self.declared_joints:
+            a, b = j["bones"]
+            if a in piece and b in piece:
+                merged[root(piece[a])] = root(piece[b])
+            elif a in piece or b in piece:
+                extra_anchored.append(piece[a] if a in piece else piece[b])
+        lut = np.arange(comp.max() + 1)
+        for c in merged:
+            lut[c] = root(c)
+        comp = lut[comp]
+        anchored = np.unique(np.concatenate([comp[pins[used[pins]]],
+                                             np.array([root(c) for c in extra_anchored], dtype=comp.dtype)]))
         loose = np.setdiff1d(np.unique(comp[used]), anchored)
         if len(loose):
             size = int(np.sum(comp[used] == loose[0]))
@@ -395,7 +446,46 @@ class Scene:
         if movable:
             model.bone = bone[keep]
             model.num_bones = len(movable)
+        pts, pairs = self._declared_joint_rows()
+        if len(pts):
+            model.joint_points = pts
+            model.joint_bones = pairs.astype(np.int32)
         return model
+
+    def _declared_joint_rows(self):
+        """Rest points (#rows, 3) and (movable bone, other movable bone or -1) of
+        the declared joints: one row per ball joint, two per hinge."""
+        movable = self.movable_bones
+        diag = float(np.linalg.norm(self.points.max(0) - self.points.min(0)))
+        pts, pairs = [], []
+        for j in self.declared_joints:
+            a, b = j["bones"]
+            if a not in movable:
+                a, b = b, a
+            if a not in movable:
+                raise ValueError(f"joint {j['bones']}: both bones are fixed; make one of them movable "
+                                 "(fixed=False) or drop the joint")
+            ib = movable.index(b) if b in movable else -1
+            rows = [j["centre"]] if j["axis"] is None else [j["centre"] - 0.1 * diag * j["axis"],
+                                                           j["centre"] + 0.1 * diag * j["axis"]]
+            for p in rows:
+                pts.append(p)
+                pairs.append((movable.index(a), ib))
+        return np.asarray(pts, float).reshape(-1, 3), np.asarray(pairs, np.int64).reshape(-1, 2)
+
+    def declared_joint_world(self):
+        """(row, world bone name) of every declared-joint row tied to a fixed bone."""
+        movable = self.movable_bones
+        out, row = [], 0
+        for j in self.declared_joints:
+            a, b = j["bones"]
+            if a not in movable:
+                a, b = b, a
+            n = 1 if j["axis"] is None else 2
+            if b not in movable:
+                out += [(row + i, b) for i in range(n)]
+            row += n
+        return out
 
     def __repr__(self):
         parts = ", ".join(f"{p.name} ({p.kind}, {len(p.tets)} tets)" for p in self.parts.values())

@@ -213,6 +213,15 @@ class Solver:
             targets = targets.copy()
             targets[np.searchsorted(ids, self.scene.pinned)] = pins
         load.pin_positions = targets
+        world = self.scene.declared_joint_world()
+        if world and bone_poses:
+            pts, _ = self.scene._declared_joint_rows()
+            jt = pts.copy()
+            for row, bone in world:
+                if bone in bone_poses:
+                    R, t = _pose(bone, bone_poses[bone])
+                    jt[row] = R @ pts[row] + t
+            load.joint_targets = jt
         return load
 
     def solve(self, activation=None, *, normalized: bool = False, gravity=None, pin_positions=None,

@@ -66,6 +66,14 @@ void Model::validate() const {
   } else if (num_bones != 0) {
     fail("num_bones > 0 but no per-tet bone ids were given");
   }
+  if (joint_points.rows() != joint_bones.rows()) fail("joint_points and joint_bones differ in rows");
+  check_finite(joint_points, "joint points");
+  for (Eigen::Index i = 0; i < joint_bones.rows(); ++i) {
+    const int a = joint_bones(i, 0), b = joint_bones(i, 1);
+    if (a < 0 || a >= num_bones || b < -1 || b >= num_bones || a == b)
+      fail("declared joint " + std::to_string(i) + " names bones (" + std::to_string(a) + ", " + std::to_string(b) +
+           "): the first must be a movable bone, the second another movable bone or -1 (the world)");
+  }
   if (pinned.size() == 0)
     fail("the scene is not anchored: pin some vertices (scene.pin) or fix a bone; "
          "otherwise it can move freely and no equilibrium is unique");
@@ -96,13 +104,17 @@ Discretization::Discretization(const Model& model) : geometry(tet_geometry(model
       bone_count(b) += 1;
     }
     if (l.empty()) continue;
+    const Eigen::Vector3d X = model.rest.row(v).transpose();
     if (pinned[v]) {
-      for (int b : l) joints.push_back({static_cast<int>(v), b, -1});
+      for (int b : l) joints.push_back({X, static_cast<int>(v), b, -1, -1});
     } else {
       vertex_bone(v) = l[0];
-      for (size_t i = 1; i < l.size(); ++i) joints.push_back({static_cast<int>(v), l[i], l[0]});
+      for (size_t i = 1; i < l.size(); ++i) joints.push_back({X, static_cast<int>(v), l[i], l[0], -1});
     }
   }
+  for (Eigen::Index i = 0; i < model.joint_points.rows(); ++i)
+    joints.push_back({model.joint_points.row(i).transpose(), -1, model.joint_bones(i, 0), model.joint_bones(i, 1),
+                      static_cast<int>(i)});
   for (int b = 0; b < num_bones; ++b) bone_center.row(b) /= bone_count(b);
   free_index = Eigen::VectorXi::Zero(n);
   num_free = 0;
@@ -142,6 +154,12 @@ void validate_load(const Model& model, const LoadCase& load) {
     fail(s.str());
   }
   check_finite(load.pin_positions, "pin positions");
+  if (load.joint_targets.rows() != 0 && load.joint_targets.rows() != model.joint_points.rows()) {
+    std::ostringstream s;
+    s << "joint_targets has " << load.joint_targets.rows() << " rows, expected " << model.joint_points.rows();
+    fail(s.str());
+  }
+  check_finite(load.joint_targets, "joint targets");
   check_finite(load.gravity, "gravity");
 }
 

@@ -25,6 +25,12 @@ struct Model {
   // follow one rotation and translation; its tets carry no elastic energy.
   // Vertices a bone shares with a pinned vertex or another bone are joints.
   Eigen::VectorXi bone;
+  // Joints declared at points (for bones that share no vertex there): row i
+  // joins movable bone joint_bones(i, 0) to joint_bones(i, 1), another movable
+  // bone or -1 for the world (a fixed or scripted bone), at rest point
+  // joint_points.row(i). A ball joint is one row, a hinge two rows on its axis.
+  Eigen::MatrixX3d joint_points;  // #J by 3
+  Eigen::MatrixX2i joint_bones;   // #J by 2
   int num_muscles = 0;
   int num_bones = 0;
 
@@ -37,13 +43,16 @@ struct LoadCase {
   Eigen::VectorXd activation;      // #muscles absolute activation a (>= 0)
   Eigen::MatrixX3d pin_positions;  // #P by 3 targets of the pinned vertices (empty: rest)
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // acceleration
+  Eigen::MatrixX3d joint_targets;  // #J by 3 where declared world joints are (empty: rest)
 };
 
-/// A vertex a movable bone shares with something that also places it: a
-/// pinned vertex (fixed or scripted bone, user pin; other = -1) or another
-/// movable bone (other = that bone, which owns the vertex's position).
-struct JointVertex {
-  int vertex, bone, other;
+/// A point of a movable bone that something else also places: a vertex it
+/// shares with a pinned vertex (fixed or scripted bone, user pin; other = -1)
+/// or with another movable bone (other = that bone, which owns the vertex's
+/// position), or a declared joint point (vertex = -1, declared = its row).
+struct JointPoint {
+  Eigen::Vector3d rest;
+  int vertex, bone, other, declared;
 };
 
 /// Derived, immutable data shared by the solvers.
@@ -59,7 +68,7 @@ struct Discretization {
   int num_bones = 0;
   Eigen::VectorXi vertex_bone;
   Eigen::MatrixX3d bone_center;        // num_bones by 3 rest centroids of each bone's vertices
-  std::vector<JointVertex> joints;
+  std::vector<JointPoint> joints;
   // EMU unknowns: one per soft tet (in tet order), then one per bone.
   // owner: #T unknown of each tet; unknown_ptr/unknown_tets: the tets of each
   // unknown (CSR).

@@ -35,11 +35,14 @@ void reduce_to_unknowns(const Discretization& disc, const Mat9X& per_tet, Mat9X&
 }
 
 namespace {
-Eigen::Vector4d phi_of(const Model& model, const Discretization& disc, int v, int b) {
+Eigen::Vector4d phi_at(const Discretization& disc, const Eigen::Vector3d& X, int b) {
   Eigen::Vector4d p;
-  p.head<3>() = (model.rest.row(v) - disc.bone_center.row(b)).transpose();
+  p.head<3>() = X - disc.bone_center.row(b).transpose();
   p(3) = 1.0;
   return p;
+}
+Eigen::Vector4d phi_of(const Model& model, const Discretization& disc, int v, int b) {
+  return phi_at(disc, model.rest.row(v).transpose(), b);
 }
 }  // namespace
 
@@ -113,9 +116,9 @@ void AcapOperator::setup_bones() {
   const int nj = static_cast<int>(disc_.joints.size());
   J_ = Eigen::MatrixXd::Zero(nj, nq_);
   for (int r = 0; r < nj; ++r) {
-    const JointVertex& j = disc_.joints[r];
-    J_.block<1, 4>(r, 4 * j.bone) += phi_of(model_, disc_, j.vertex, j.bone).transpose();
-    if (j.other >= 0) J_.block<1, 4>(r, 4 * j.other) -= phi_of(model_, disc_, j.vertex, j.other).transpose();
+    const JointPoint& j = disc_.joints[r];
+    J_.block<1, 4>(r, 4 * j.bone) += phi_at(disc_, j.rest, j.bone).transpose();
+    if (j.other >= 0) J_.block<1, 4>(r, 4 * j.other) -= phi_at(disc_, j.rest, j.other).transpose();
   }
   Eigen::MatrixXd V;
   rank_ = 0;
@@ -142,10 +145,14 @@ void AcapOperator::setup_bones() {
   reduced_.compute(red);
 }
 
-Eigen::MatrixX3d AcapOperator::joint_targets(const Eigen::MatrixX3d& x) const {
+Eigen::MatrixX3d AcapOperator::joint_targets(const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& declared) const {
   Eigen::MatrixX3d h = Eigen::MatrixX3d::Zero(disc_.joints.size(), 3);
-  for (size_t r = 0; r < disc_.joints.size(); ++r)
-    if (disc_.joints[r].other < 0) h.row(r) = x.row(disc_.joints[r].vertex);
+  for (size_t r = 0; r < disc_.joints.size(); ++r) {
+    const JointPoint& j = disc_.joints[r];
+    if (j.other >= 0) continue;
+    if (j.vertex >= 0) h.row(r) = x.row(j.vertex);
+    else h.row(r) = declared.rows() ? Eigen::RowVector3d(declared.row(j.declared)) : Eigen::RowVector3d(j.rest.transpose());
+  }
   return h;
 }
 

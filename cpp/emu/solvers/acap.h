@@ -57,8 +57,10 @@ class AcapOperator {
   /// joint_targets), nullptr for homogeneous joints (a displacement fit).
   void fit(const Mat9X& F, const Mat9X* F_pinned, const Eigen::MatrixX3d* h, Eigen::MatrixX3d& x) const;
 
-  /// Joint targets h (#joint rows by 3) of positions x (#V by 3) whose pinned rows are set.
-  Eigen::MatrixX3d joint_targets(const Eigen::MatrixX3d& x) const;
+  /// Joint targets h (#joint rows by 3): pinned joint vertices from positions x
+  /// (#V by 3, pinned rows set), declared world joints from declared (#J by 3;
+  /// empty: rest).
+  Eigen::MatrixX3d joint_targets(const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& declared) const;
 
   /// Z = K_c^-1 R with homogeneous joints: R, Z are dofs() by ncols (any ncols).
   void solve(const Eigen::MatrixXd& R, Eigen::MatrixXd& Z) const { solve_with(R, nullptr, Z); }

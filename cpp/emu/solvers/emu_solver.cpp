@@ -81,7 +81,7 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
       f.row(v) = disc_.lumped_mass(v) * load.gravity.transpose();
     }
   deformation_gradients(disc_, model_.tets, c.x_pinned, c.F_pinned);
-  c.h = acap_->joint_targets(pinned_positions(model_, load));
+  c.h = acap_->joint_targets(pinned_positions(model_, load), load.joint_targets);
   c.gravity = load.gravity;
   c.has_gravity = load.gravity.squaredNorm() > 0;
   if (c.has_gravity) {

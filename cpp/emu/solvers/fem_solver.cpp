@@ -58,7 +58,7 @@ enum class BoneKind { Free, Ball, Hinge };
 struct RigidBone {
   BoneKind kind = BoneKind::Free;
   int offset = 0, dofs = 6;
-  int pivot = -1, axis_end = -1;  // anchor vertices (ball: pivot; hinge: both)
+  int axis_end = -1;              // hinge: the anchor that spans the axis with the pivot
   Vec3 P = Vec3::Zero();          // rest pivot
   Mat3 R = Mat3::Identity();
   Vec3 p = Vec3::Zero();          // current pivot
@@ -94,11 +94,11 @@ FemSolver::FemSolver(const Model& model, const SolverOptions& options)
       options_(options),
       pattern_(model_.tets, disc_.free_index, disc_.num_free, 3) {
   const auto t0 = Clock::now();
-  for (const JointVertex& j : disc_.joints)
+  for (const JointPoint& j : disc_.joints)
     if (j.other >= 0)
       throw std::invalid_argument("the FEM solver does not support joints between two movable bones yet (bones " +
                                   std::to_string(j.bone) + " and " + std::to_string(j.other) +
-                                  " share vertex " + std::to_string(j.vertex) + "); use method='emu' or fix one bone");
+                                  "); use method='emu' or fix one bone");
   for (Eigen::Index t = 0; t < model_.tets.rows() && disc_.num_bones; ++t) {
     if (disc_.is_bone_tet(t)) continue;
     for (int a = 0; a < 4; ++a)
@@ -222,8 +222,14 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   const int nb = disc_.num_bones;
   const double diag = bbox_diagonal(model_.rest);
   std::vector<RigidBone> bones(nb);
-  std::vector<std::vector<int>> anchors(nb);
-  for (const JointVertex& j : disc_.joints) anchors[j.bone].push_back(j.vertex);
+  // Anchors: (rest point, target) of every joint point of a bone.
+  std::vector<std::vector<std::pair<Vec3, Vec3>>> anchors(nb);
+  for (const JointPoint& j : disc_.joints) {
+    Vec3 target = j.rest;
+    if (j.vertex >= 0) target = x.row(j.vertex).transpose();
+    else if (load.joint_targets.rows()) target = load.joint_targets.row(j.declared).transpose();
+    anchors[j.bone].push_back({j.rest, target});
+  }
   for (Eigen::Index v = 0; v < x.rows(); ++v)
     if (disc_.vertex_bone(v) >= 0) bones[disc_.vertex_bone(v)].vertices.push_back(static_cast<int>(v));
   int nd = 0;
@@ -235,22 +241,19 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
       B.dofs = 6;
       B.P = disc_.bone_center.row(b).transpose();
     } else {
-      B.pivot = an[0];
-      const Vec3 X0 = model_.rest.row(an[0]).transpose();
-      for (size_t i = 1; i < an.size(); ++i) {
-        const Vec3 Xi = model_.rest.row(an[i]).transpose();
-        if (B.axis_end < 0 && (Xi - X0).norm() > 1e-9 * diag) B.axis_end = an[i];
-      }
+      const Vec3 X0 = an[0].first;
+      for (size_t i = 1; i < an.size(); ++i)
+        if (B.axis_end < 0 && (an[i].first - X0).norm() > 1e-9 * diag) B.axis_end = static_cast<int>(i);
       B.kind = B.axis_end < 0 ? BoneKind::Ball : BoneKind::Hinge;
       B.dofs = B.axis_end < 0 ? 3 : 1;
       if (B.axis_end >= 0) {
-        const Vec3 a = (model_.rest.row(B.axis_end).transpose() - X0).normalized();
-        for (int v : an) {
-          const Vec3 r = model_.rest.row(v).transpose() - X0;
+        const Vec3 a = (an[B.axis_end].first - X0).normalized();
+        for (const auto& pt : an) {
+          const Vec3 r = pt.first - X0;
           if ((r - r.dot(a) * a).norm() > 1e-6 * diag)
             throw std::invalid_argument("movable bone " + std::to_string(b) +
-                                        " is welded: it shares non-collinear vertices with pinned vertices or a "
-                                        "fixed bone; fix the bone instead");
+                                        " is welded: its joints with pinned vertices or fixed bones are not on "
+                                        "one line; fix the bone instead");
         }
       }
       B.P = X0;
@@ -267,10 +270,11 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
     if (B.kind == BoneKind::Free) {
       B.p = Yb.colwise().mean().transpose() - B.R * (Xb.colwise().mean().transpose() - B.P);
     } else {
-      B.p = x.row(B.pivot).transpose();
+      const auto& an = anchors[b];
+      B.p = an[0].second;
       if (B.kind == BoneKind::Hinge) {
-        const Vec3 rest_axis = (model_.rest.row(B.axis_end) - model_.rest.row(B.pivot)).transpose();
-        const Vec3 target = (x.row(B.axis_end) - x.row(B.pivot)).transpose();
+        const Vec3 rest_axis = an[B.axis_end].first - an[0].first;
+        const Vec3 target = an[B.axis_end].second - an[0].second;
         if (std::abs(target.norm() - rest_axis.norm()) > 1e-6 * rest_axis.norm())
           throw std::invalid_argument("the hinge of movable bone " + std::to_string(b) +
                                       " is stretched by its pinned vertices' targets (move them rigidly)");
