@@ -55,7 +55,8 @@ def _print_info(args):
                              for b in bones)
             print(f"  bones: {desc}")
             for j in scene.joints():
-                where = f"vertices {j['vertices'].tolist()}" if len(j["vertices"]) <= 4 else \
+                where = "a declared point" if j.get("declared") else \
+                    f"vertices {j['vertices'].tolist()}" if len(j["vertices"]) <= 4 else \
                     f"{len(j['vertices'])} vertices"
                 extra = f", axis {np.round(j['axis'], 6).tolist()}" if j["axis"] is not None else ""
                 print(f"  joint {j['bones'][0]} - {j['bones'][1]}: {j['kind']} at {where}, "
