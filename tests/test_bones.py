@@ -289,3 +289,25 @@ def test_declared_joint_errors():
     s.add_joint("lower", "upper", centre=[1.5, 1.5, 0.5])
     with pytest.raises(ValueError, match="both bones are fixed"):
         emu.Solver(s, "fem")
+
+
+def test_big_muscle_free_bone_is_pulled_toward_the_fixed_one():
+    path = SHARED_DATA / "big_muscle" / "big_muscle.vtu"
+    s = emu.io.load_scene(path, free_bones=["bone_2"], warn=False)
+    assert s.joints() == []              # no joint: bone_2 is held by the muscle alone
+    c1 = s.points[np.unique(s.tets[s.parts["bone_1"].tets])].mean(axis=0)
+    c2 = s.points[np.unique(s.tets[s.parts["bone_2"].tets])].mean(axis=0)
+    gap = np.linalg.norm(c1 - c2)
+    moved = {}
+    for method in ("fem", "emu"):
+        sol = emu.Solver(s, method).solve({"muscle": 1e4})
+        assert sol.converged, sol.status
+        bm = bone_motion(s, sol, "bone_2")
+        assert bm.rigidity < 1e-6
+        new_c2 = bm.R @ c2 + bm.t
+        moved[method] = gap - np.linalg.norm(c1 - new_c2)
+        fixed = np.unique(s.tets[s.parts["bone_1"].tets].ravel())
+        np.testing.assert_array_equal(sol.positions[fixed], s.points[fixed])
+    # FEM: about 1.5 of the 10.4 units between the centres; EMU within 5% of that
+    assert 0.05 * gap < moved["fem"] < 0.5 * gap, moved
+    assert abs(moved["emu"] - moved["fem"]) < 0.05 * moved["fem"], moved

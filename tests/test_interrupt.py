@@ -4,8 +4,11 @@ import subprocess
 import sys
 import time
 
+# The child installs Python's SIGINT handler itself: a shell that starts a job in
+# the background (as CI harnesses may) makes it inherit SIGINT ignored.
 SCRIPT = r"""
-import time, emu
+import signal, time, emu
+signal.signal(signal.SIGINT, signal.default_int_handler)
 from emu.meshes import fusiform
 m = fusiform(3)
 s = emu.Scene(m.points, m.tets, warn=False)
