@@ -311,3 +311,33 @@ def test_big_muscle_free_bone_is_pulled_toward_the_fixed_one():
     # FEM: about 1.5 of the 10.4 units between the centres; EMU within 5% of that
     assert 0.05 * gap < moved["fem"] < 0.5 * gap, moved
     assert abs(moved["emu"] - moved["fem"]) < 0.05 * moved["fem"], moved
+
+
+def test_scene_file_declared_joint(tmp_path):
+    from emu.scenefile import SceneFileError, load_scene_file
+
+    s = gap_scene()
+    mesh = tmp_path / "gap.vtu"
+    part = np.zeros(len(s.tets), np.int32)
+    for i, name in enumerate(("upper", "lower", "muscle")):
+        part[s.parts[name].tets] = i
+    emu.io.write(mesh, s.points, s.tets, cell_data={"part": part})
+    (tmp_path / "scene.json").write_text(
+        '{"parts": [{"id": 0, "name": "upper", "kind": "bone"}, {"id": 1, "name": "lower", "kind": "bone"}, '
+        '{"id": 2, "name": "muscle", "kind": "muscle"}]}')
+    base = ('[mesh]\npath = "gap.vtu"\nfibers = "laplace"\n[bones.lower]\nfixed = false\n'
+            '[joints.elbow]\nbones = ["lower", "upper"]\ncentre = [1.5, 1.5, 0.5]\n')
+    p = tmp_path / "s.toml"
+    p.write_text(base + "axis = [0, 0, 1]\n")
+    spec = load_scene_file(p)
+    (j,) = spec.scene.joints()
+    assert j["kind"] == "hinge" and j["declared"] and j["bones"] == ("lower", "upper")
+    p.write_text(base)
+    assert load_scene_file(p).scene.joints()[0]["kind"] == "ball"
+    for text, match in [(base.replace('"upper"]', '"ulna"]'), "no bone named 'ulna'"),
+                        (base + "axis = [0, 1]\n", "axis must be three numbers"),
+                        (base.replace('centre = [1.5, 1.5, 0.5]\n', ''), "missing 'centre'"),
+                        (base + "angle = 3.0\n", "unknown key 'joints.elbow.angle'")]:
+        p.write_text(text)
+        with pytest.raises(SceneFileError, match=match):
+            load_scene_file(p)

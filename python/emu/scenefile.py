@@ -49,6 +49,11 @@
     fixed = false
     acap_weight = 1e4            # EMU's ACAP weight on its tets (rigidity of the fitted positions)
 
+    [joints.elbow]               # a joint declared where two bones do not touch (joints at
+    bones = ["ulna", "humerus"]  # shared vertices are found by themselves): a ball joint at
+    centre = [0.0, 0.0, 0.0]     # `centre`, or with `axis` a hinge about the line through it
+    axis = [0.0, 0.0, 1.0]
+
     [bones.radius]               # a scripted bone (fixed bones, the default, may be scripted):
     axis = [0.0, 0.0, 1.0]       # rotation axis through `center`, angle keyframes in degrees
     center = [0.0, 0.0, 0.0]
@@ -93,10 +98,12 @@ _SCHEMA = {
     "frames": {"count": int, "dt": float},
     "activation": "table of tables",
     "bones": "table of tables",
+    "joints": "table of tables",
     "output": {"dir": str, "vtu": bool, "obj": bool},
 }
 _BONE_KEYS = {"fixed": bool, "acap_weight": float, "axis": list, "center": list, "angle": list,
               "interpolation": str}
+_JOINT_KEYS = {"bones": list, "centre": list, "axis": list}
 _MATERIAL_KEYS = {"youngs": float, "poisson": float, "density": float, "max_activation": float,
                   "acap_weight": float}
 _CURVE_KEYS = {"keys": list, "per_frame": list, "interpolation": str, "normalized": bool}
@@ -290,6 +297,22 @@ def load_scene_file(path) -> SceneSpec:
         except ValueError as e:
             raise SceneFileError(f"bones.{name}.angle: {e}") from None
         bones[name] = (np.asarray(spec["axis"], float), np.asarray(spec["center"], float), curve)
+    for name, spec in data.get("joints", {}).items():
+        _check_table(spec, _JOINT_KEYS, f"joints.{name}")
+        for key in ("bones", "centre"):
+            if key not in spec:
+                raise SceneFileError(f"joints.{name}: missing '{key}'")
+        b = spec["bones"]
+        if len(b) != 2 or not all(isinstance(x, str) for x in b):
+            raise SceneFileError(f"joints.{name}.bones must be two bone names, got {b!r}")
+        for key in ("centre", "axis"):
+            v = spec.get(key)
+            if v is not None and (len(v) != 3 or not all(_type_ok(x, float) for x in v)):
+                raise SceneFileError(f"joints.{name}.{key} must be three numbers, got {v!r}")
+        try:
+            scene.add_joint(b[0], b[1], spec["centre"], spec.get("axis"))
+        except ValueError as e:
+            raise SceneFileError(f"joints.{name}: {e}") from None
     output = {"dir": "emu_run", "vtu": True, "obj": True}
     output.update(data.get("output", {}))
     return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, bones=bones, output=output,

@@ -174,12 +174,7 @@ void FemSolver::assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorX
   pattern_.assemble(element_.data(), values_.data());
 }
 
-void FemSolver::vertex_forces(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const Eigen::Vector3d& grav,
-                              Eigen::MatrixX3d& f) const {
-  // dE/dx_v at the vertices that move with a bone (corner_ holds the per-tet
-  // corner forces of the last free_gradient call at x).
-  (void)x;
-  (void)act;
+void FemSolver::vertex_forces(const Eigen::Vector3d& grav, Eigen::MatrixX3d& f) const {
   f = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
   for (int t : bone_touching_)
     for (int a = 0; a < 4; ++a) {
@@ -310,7 +305,7 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   auto reduced_gradient = [&](const Eigen::MatrixX3d& xx, const std::vector<RigidBone>& bs) {
     free_gradient(load, xx, act, gs);
     if (!nd) return;
-    vertex_forces(xx, act, load.gravity, fv);
+    vertex_forces(load.gravity, fv);
     gb.setZero();
     for (const RigidBone& B : bs)
       for (int v : B.vertices)

@@ -43,8 +43,9 @@ class FemSolver {
                      Eigen::VectorXd& g) const;
   double energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const Eigen::Vector3d& grav) const;
   void assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, bool exact);
-  void vertex_forces(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const Eigen::Vector3d& grav,
-                     Eigen::MatrixX3d& f) const;
+  /// dE/dx at the vertices that move with a bone, from the corner forces of the
+  /// last free_gradient call (#V by 3, zero elsewhere).
+  void vertex_forces(const Eigen::Vector3d& grav, Eigen::MatrixX3d& f) const;
 
   Model model_;
   Discretization disc_;
