@@ -341,3 +341,40 @@ def test_scene_file_declared_joint(tmp_path):
         p.write_text(text)
         with pytest.raises(SceneFileError, match=match):
             load_scene_file(p)
+
+
+# ------------------------------------------------------------- passive joint stiffness
+def test_joint_stiffness_derivatives_and_agreement():
+    k = 1.0   # N m / rad: holds the flexed forearm back from 24 to about 20 degrees
+    s = arm(1)
+    s.parts["forearm"].joint_stiffness = k
+    solver = emu.Solver(s, "emu")
+    core = solver._core
+    load = solver.load_case({"flexor": 0.3}, normalized=True)
+    nu = core.num_unknowns
+    rng = np.random.default_rng(5)
+    F = np.tile(np.eye(3).ravel(), (nu, 1)) + 0.02 * rng.standard_normal((nu, 9))
+    D = np.zeros((nu, 9))
+    D[-1] = rng.standard_normal(9)
+    h = 1e-6
+    fd = (core.energy(load, F + h * D) - core.energy(load, F - h * D)) / (2 * h)
+    assert abs(fd - np.sum(core.gradient(load, F) * D)) <= 1e-6 * abs(fd)
+    free = signed_angle(bone_motion(s, emu.Solver(arm(1), "fem").solve({"flexor": 0.3}, normalized=True),
+                                    "forearm").R, [0, 0, 1])
+    angles = {}
+    for method in ("fem", "emu"):
+        sol = emu.Solver(s, method).solve({"flexor": 0.3}, normalized=True)
+        assert sol.converged, sol.status
+        angles[method] = signed_angle(bone_motion(s, sol, "forearm").R, [0, 0, 1])
+    assert 1.0 < angles["fem"] < free - 1.0, (angles, free)     # the spring holds it back
+    assert abs(angles["emu"] - angles["fem"]) < 1.5, angles
+    # FEM's answer is the minimum of (scripted-bone energy + spring) over the angle
+    scripted = emu.Solver(arm(1, forearm_fixed=True), "fem", rtol_grad=1e-9)
+
+    def total(deg):
+        sol = scripted.solve({"flexor": 0.3}, normalized=True,
+                             bone_poses={"forearm": emu.pose_about([0, 0, 1], deg, [0, 0, 0])})
+        return sol.energy + k * (1 - np.cos(np.radians(deg)))
+
+    e0 = total(angles["fem"])
+    assert total(angles["fem"] - 0.5) > e0 and total(angles["fem"] + 0.5) > e0

@@ -57,6 +57,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("num_bones", &Model::num_bones)
       .def_readwrite("joint_points", &Model::joint_points)
       .def_readwrite("joint_bones", &Model::joint_bones)
+      .def_readwrite("bone_stiffness", &Model::bone_stiffness)
       .def("validate", &Model::validate);
 
   py::class_<LoadCase>(m, "LoadCase")

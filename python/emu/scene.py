@@ -45,6 +45,7 @@ class Part:
     fibers: np.ndarray | None = None   # (len(tets), 3) unit vectors, muscles only
     max_activation: float = 1e5        # a for normalised activation 1.0
     fixed: bool = True                 # bones: fixed (or scripted) rather than moved by the muscles
+    joint_stiffness: float = 0.0       # movable bones: passive rotational stiffness (N m / rad)
 
     @property
     def mu(self) -> float:
@@ -150,7 +151,8 @@ class Scene:
                               acap_weight if acap_weight is not None else np.nan))
 
     def add_bone(self, name: str, tets, *, youngs: float = 1e10, poisson: float = 0.49,
-                 density: float = 1900.0, fixed: bool = True, acap_weight: float = BONE_ACAP_WEIGHT) -> Part:
+                 density: float = 1900.0, fixed: bool = True, acap_weight: float = BONE_ACAP_WEIGHT,
+                 joint_stiffness: float = 0.0) -> Part:
         """A bone: rigid. Muscle vertices it shares are attachments; vertices it
         shares with another bone are a joint (see joints()).
 
@@ -161,12 +163,18 @@ class Scene:
                      if it has none. Its density counts under gravity.
         acap_weight  EMU's ACAP weight on the bone's tets (movable bones): the larger,
                      the closer the fitted positions follow the bone's rotation.
+        joint_stiffness  movable bones: a passive spring k (N m / rad) against turning
+                     away from the rest pose, energy k (1 - cos theta) ~ k theta^2 / 2
+                     (ligaments; it also removes neutral modes a lone muscle leaves).
         """
         idx = self._tet_ids(name, tets)
         lame(youngs, poisson)
         if not acap_weight > 0:
             raise ValueError(f"bone '{name}': acap_weight must be positive, got {acap_weight!r}")
-        return self._add(Part(name, "bone", idx, youngs, poisson, density, float(acap_weight), fixed=bool(fixed)))
+        if not (np.isfinite(joint_stiffness) and joint_stiffness >= 0):
+            raise ValueError(f"bone '{name}': joint_stiffness must be >= 0, got {joint_stiffness!r}")
+        return self._add(Part(name, "bone", idx, youngs, poisson, density, float(acap_weight), fixed=bool(fixed),
+                              joint_stiffness=float(joint_stiffness)))
 
     @property
     def movable_bones(self) -> list:
@@ -446,6 +454,9 @@ class Scene:
         if movable:
             model.bone = bone[keep]
             model.num_bones = len(movable)
+            k = np.array([self.parts[n].joint_stiffness for n in movable], float)
+            if np.any(k > 0):
+                model.bone_stiffness = k
         pts, pairs = self._declared_joint_rows()
         if len(pts):
             model.joint_points = pts

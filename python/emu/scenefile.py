@@ -48,6 +48,7 @@
     [bones.ulna]                 # a bone the muscles move (rigid, turning about its joints)
     fixed = false
     acap_weight = 1e4            # EMU's ACAP weight on its tets (rigidity of the fitted positions)
+    joint_stiffness = 0.0        # passive spring against turning from rest, N m / rad
 
     [joints.elbow]               # a joint declared where two bones do not touch (joints at
     bones = ["ulna", "humerus"]  # shared vertices are found by themselves): a ball joint at
@@ -101,8 +102,8 @@ _SCHEMA = {
     "joints": "table of tables",
     "output": {"dir": str, "vtu": bool, "obj": bool},
 }
-_BONE_KEYS = {"fixed": bool, "acap_weight": float, "axis": list, "center": list, "angle": list,
-              "interpolation": str}
+_BONE_KEYS = {"fixed": bool, "acap_weight": float, "joint_stiffness": float, "axis": list, "center": list,
+              "angle": list, "interpolation": str}
 _JOINT_KEYS = {"bones": list, "centre": list, "axis": list}
 _MATERIAL_KEYS = {"youngs": float, "poisson": float, "density": float, "max_activation": float,
                   "acap_weight": float}
@@ -273,6 +274,10 @@ def load_scene_file(path) -> SceneSpec:
         _check_table(spec, _BONE_KEYS, f"bones.{name}")
         if "fixed" in spec:
             part.fixed = bool(spec["fixed"])
+        if "joint_stiffness" in spec:
+            if not spec["joint_stiffness"] >= 0:
+                raise SceneFileError(f"bones.{name}.joint_stiffness must be >= 0, got {spec['joint_stiffness']!r}")
+            part.joint_stiffness = float(spec["joint_stiffness"])
         if "acap_weight" in spec:
             if not spec["acap_weight"] > 0:
                 raise SceneFileError(f"bones.{name}.acap_weight must be positive, got {spec['acap_weight']!r}")

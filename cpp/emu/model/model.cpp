@@ -66,6 +66,11 @@ void Model::validate() const {
   } else if (num_bones != 0) {
     fail("num_bones > 0 but no per-tet bone ids were given");
   }
+  if (bone_stiffness.size() != 0 && bone_stiffness.size() != num_bones)
+    fail("bone_stiffness needs one value per movable bone (" + std::to_string(num_bones) + "), got " +
+         std::to_string(bone_stiffness.size()));
+  check_finite(bone_stiffness, "bone_stiffness");
+  if (bone_stiffness.size() && bone_stiffness.minCoeff() < 0) fail("bone_stiffness must be >= 0");
   if (joint_points.rows() != joint_bones.rows()) fail("joint_points and joint_bones differ in rows");
   check_finite(joint_points, "joint points");
   for (Eigen::Index i = 0; i < joint_bones.rows(); ++i) {

@@ -31,6 +31,10 @@ struct Model {
   // joint_points.row(i). A ball joint is one row, a hinge two rows on its axis.
   Eigen::MatrixX3d joint_points;  // #J by 3
   Eigen::MatrixX2i joint_bones;   // #J by 2
+  // #bones passive rotational stiffness k of each movable bone about its rest
+  // orientation: energy k/2 (3 - tr R) = k (1 - cos theta) ~ k theta^2 / 2
+  // for a turn theta (empty: none).
+  Eigen::VectorXd bone_stiffness;
   int num_muscles = 0;
   int num_bones = 0;
 

@@ -164,6 +164,12 @@ double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx
   }
   double E = 0;
   for (Eigen::Index t = 0; t < m; ++t) E += tet_energy_[t];
+  // Passive joint springs: k/2 (3 - tr F_b).
+  for (int b = 0; b < model_.bone_stiffness.size(); ++b) {
+    const int u = disc_.num_soft + b;
+    const Mat3 Fb = unflatten(D ? Vec9(F.col(u) + s * D->col(u)) : Vec9(F.col(u)));
+    E += 0.5 * model_.bone_stiffness(b) * (3.0 - Fb.trace());
+  }
   return E;
 }
 
@@ -184,6 +190,8 @@ void EmuSolver::gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx,
     per_tet.col(t) = gt;
   }
   reduce_to_unknowns(disc_, per_tet, g);
+  for (int b = 0; b < model_.bone_stiffness.size(); ++b)
+    g.col(disc_.num_soft + b) -= 0.5 * model_.bone_stiffness(b) * flatten(Mat3::Identity());
 }
 
 void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>* A,

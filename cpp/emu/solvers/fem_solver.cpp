@@ -299,6 +299,7 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
     }
     return out;
   };
+  const Eigen::VectorXd& kb = model_.bone_stiffness;  // passive joint springs, if any
   // Reduced gradient: soft rows then bone rows (torques, forces).
   Eigen::VectorXd gs, gb(nd);
   Eigen::MatrixX3d fv;
@@ -310,6 +311,14 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
     for (const RigidBone& B : bs)
       for (int v : B.vertices)
         gb.segment(B.offset, B.dofs) += B.jacobian((xx.row(v).transpose() - B.p)).transpose() * fv.row(v).transpose();
+    // spring: d/dw of -k/2 tr(exp(w^) R) at w = 0 is k/2 (R32 - R23, R13 - R31, R21 - R12)
+    for (int b = 0; b < kb.size(); ++b) {
+      const RigidBone& B = bs[b];
+      const Mat3& R = B.R;
+      const Vec3 gw = 0.5 * kb(b) * Vec3(R(2, 1) - R(1, 2), R(0, 2) - R(2, 0), R(1, 0) - R(0, 1));
+      if (B.kind == BoneKind::Hinge) gb(B.offset) += B.axis_current.dot(gw);
+      else gb.segment<3>(B.offset) += gw;
+    }
   };
   // Torques are scaled by the bounding-box diagonal in the reported norm (units of force).
   auto grad_norm = [&](const std::vector<RigidBone>& bs) {
@@ -321,7 +330,13 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
       }
     return std::sqrt(n2);
   };
-  double E = energy_with(x, act, load.gravity);
+  // Passive joint springs k/2 (3 - tr R) (model.bone_stiffness).
+  auto spring_energy = [&](const std::vector<RigidBone>& bs) {
+    double e = 0;
+    for (int b = 0; b < kb.size(); ++b) e += 0.5 * kb(b) * (3.0 - bs[b].R.trace());
+    return e;
+  };
+  double E = energy_with(x, act, load.gravity) + spring_energy(bones);
   reduced_gradient(x, bones);
   // Round-off in P(F) scales with the largest modulus (lambda at nu near 0.5).
   double force_scale = 0;
@@ -372,11 +387,16 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
         }
       }
     }
-    for (const RigidBone& B : bones) {
+    for (int bi = 0; bi < nb; ++bi) {
+      const RigidBone& B = bones[bi];
       Mat3 G = Mat3::Zero();
       for (int v : B.vertices) {
         const Vec3 r = x.row(v).transpose() - B.p, f = fv.row(v).transpose();
         G += 0.5 * (f * r.transpose() + r * f.transpose()) - f.dot(r) * Mat3::Identity();
+      }
+      if (bi < kb.size()) {  // spring: k/2 (tr R I - sym R)
+        const Mat3& R = B.R;
+        G += 0.5 * kb(bi) * (R.trace() * Mat3::Identity() - 0.5 * (R + R.transpose()));
       }
       if (!exact) {  // filtered Newton: clamp the rotation term's negative curvature
         Eigen::SelfAdjointEigenSolver<Mat3> es(G);
@@ -456,7 +476,7 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
         trial_bones = moved(db, s);
         place_bones(trial_bones, trial);
       }
-      return energy_with(trial, act, load.gravity);
+      return energy_with(trial, act, load.gravity) + spring_energy(nd ? trial_bones : bones);
     };
     auto ls = armijo_backtracking(trial_energy, E, slope, options_);
     if (!ls.success) {
