@@ -378,3 +378,73 @@ def test_joint_stiffness_derivatives_and_agreement():
 
     e0 = total(angles["fem"])
     assert total(angles["fem"] - 0.5) > e0 and total(angles["fem"] + 0.5) > e0
+
+
+# ------------------------------------------------------------- the constrained fit, independently
+def test_bone_fit_matches_a_dense_constrained_least_squares():
+    """EMU's fit x*(F) with a movable bone and a hinge (bordered factor, null-space
+    joint solve) against a dense KKT solve built here from G, volumes and weights:
+    minimise sum_t w_t V_t |F_t(x) - F_t|^2 over soft vertices and the bone's
+    affine map, the hinge vertices at their pinned positions."""
+    from conftest import gradient_operator
+
+    s = arm(1)
+    solver = emu.Solver(s, "emu")
+    model, core = solver.model, solver._core
+    keep = solver._model_tets
+    T = s.tets[keep]
+    G, vol = gradient_operator(s.points, T)
+    G = G.toarray()
+    w = np.asarray(model.acap_weight) * vol
+    n = len(s.points)
+    pinned = np.asarray(model.pinned)
+    bone_tets = np.flatnonzero(np.asarray(model.bone) >= 0)
+    bone_verts = np.setdiff1d(np.unique(T[bone_tets]), pinned)
+    soft = np.setdiff1d(np.arange(n), np.union1d(pinned, bone_verts))
+    # x (3n) = S z + x0, z = [soft vertex coordinates, A (9, row-major), c (3)]
+    nz = 3 * len(soft) + 12
+    S = np.zeros((3 * n, nz))
+    for i, v in enumerate(soft):
+        S[3 * v:3 * v + 3, 3 * i:3 * i + 3] = np.eye(3)
+    Xbar = s.points[np.unique(T[bone_tets])].mean(axis=0)   # any reference point: the fit does not depend on it
+    o = 3 * len(soft)
+    for v in bone_verts:
+        for c in range(3):
+            S[3 * v + c, o + 3 * c:o + 3 * c + 3] = s.points[v] - Xbar
+            S[3 * v + c, o + 9 + c] = 1.0
+    x0 = np.zeros(3 * n)
+    x0[(3 * pinned[:, None] + np.arange(3)).ravel()] = s.points[pinned].ravel()
+    # joint rows: every pinned vertex of the bone sits where it is pinned
+    joint = np.intersect1d(np.unique(T[bone_tets]), pinned)
+    assert len(joint) >= 2
+    J = np.zeros((3 * len(joint), nz))
+    h = np.zeros(3 * len(joint))
+    for k, v in enumerate(joint):
+        for c in range(3):
+            J[3 * k + c, o + 3 * c:o + 3 * c + 3] = s.points[v] - Xbar
+            J[3 * k + c, o + 9 + c] = 1.0
+            h[3 * k + c] = s.points[v, c]
+    rng = np.random.default_rng(11)
+    nu = core.num_unknowns
+    Fu = np.tile(np.eye(3).ravel(), (nu, 1)) + 0.05 * rng.standard_normal((nu, 9))
+    Ft = Fu[np.asarray(core.unknown_of_tet)]            # per tet, vec column-major
+    D = np.repeat(w, 9)
+    M = G @ S
+    rhs = Ft.ravel() - G @ x0
+    K = M.T @ (D[:, None] * M)
+    b = M.T @ (D * rhs)
+    # KKT with possibly redundant joint rows: least squares on the bordered system
+    Kkt = np.block([[K, J.T], [J, np.zeros((len(h), len(h)))]])
+    sol = np.linalg.lstsq(Kkt, np.concatenate([b, h]), rcond=1e-13)[0]
+    x_ref = (S @ sol[:nz] + x0).reshape(-1, 3)
+    load = solver.load_case({}, normalized=True)
+    x = core.fit_positions(load, Fu)
+    scale = np.abs(s.points).max()
+    np.testing.assert_allclose(x, x_ref, atol=1e-9 * scale)
+    # the Woodbury modes are the constrained operator's lowest eigenpairs (joint rows
+    # included): eigenvalues of K on the null space of J, each once per coordinate
+    _, sv, vt = np.linalg.svd(J)
+    N = vt[np.sum(sv > 1e-9 * sv[0]):].T
+    ev = np.linalg.eigvalsh(N.T @ K @ N)
+    k = core.modes
+    np.testing.assert_allclose(np.sort(core.mode_values()), ev[:k], rtol=1e-8)
