@@ -121,6 +121,8 @@ def test_simple_joint_free_bone_emu_vs_fem():
 
 def test_movable_bone_errors(small_arm):
     s = small_arm
+    with pytest.raises(ValueError, match="Schur-complement preconditioner does not handle movable bones"):
+        emu.Solver(s, "emu", preconditioner="schur")
     with pytest.raises(ValueError, match="moved by the muscles"):
         emu.solve(s, {}, "fem", bone_poses={"forearm": (np.eye(3), np.zeros(3))})
     # a movable bone welded to the fixed one by a face

@@ -83,19 +83,7 @@ def fusiform(resolution: int = 6, *, tets: int | None = None, length: float = 10
 
     I, J, K = np.meshgrid(np.arange(nx), np.arange(nx), np.arange(nz), indexing="ij")
     I, J, K = I.ravel(), J.ravel(), K.ravel()
-    corners = {}
-    for b in range(8):
-        di, dj, dk = (b >> 0) & 1, (b >> 1) & 1, (b >> 2) & 1
-        corners[(di, dj, dk)] = vid(I + di, J + dj, K + dk)
-    tets = []
-    for perm in permutations(range(3)):
-        path = [(0, 0, 0)]
-        cur = [0, 0, 0]
-        for axis in perm:
-            cur[axis] = 1
-            path.append(tuple(cur))
-        tets.append(np.stack([corners[c] for c in path], axis=1))
-    tets = np.concatenate(tets, axis=0).astype(np.int64)
+    tets = _kuhn_tets(lambda di, dj, dk: vid(I + di, J + dj, K + dk)).astype(np.int64)
     # orient positively
     p = points[tets]
     vol = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
@@ -119,7 +107,9 @@ def fusiform(resolution: int = 6, *, tets: int | None = None, length: float = 10
 
 
 def _kuhn_tets(corner) -> np.ndarray:
-    """Six positively ordered corner paths of a hex (Kuhn subdivision); corner(di, dj, dk) -> ids."""
+    """The six tets of a hex around its main diagonal (Kuhn subdivision: conforming
+    across neighbouring hexes), as corner paths; corner(di, dj, dk) -> vertex ids.
+    Orientation is fixed by the caller."""
     tets = []
     for perm in permutations(range(3)):
         path = [(0, 0, 0)]
