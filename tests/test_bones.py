@@ -450,3 +450,34 @@ def test_bone_fit_matches_a_dense_constrained_least_squares():
     ev = np.linalg.eigvalsh(N.T @ K @ N)
     k = core.modes
     np.testing.assert_allclose(np.sort(core.mode_values()), ev[:k], rtol=1e-8)
+
+
+# ------------------------------------------------------------- neutral modes
+def test_a_bone_nothing_turns_is_reported_as_a_neutral_mode():
+    """A bone on a ball joint with no muscle on it: every turn about the joint
+    is free. Both solvers converge (the soft tissue elsewhere settles), leave the
+    bone alone and name it."""
+    pts, tets, lab = emu.meshes.block_mesh(
+        {"base": [(0, 0, 0), (0, 0, 1)], "loose": [(1, 1, 2)], "m": [(-1, 0, 0), (-1, 0, 1), (-2, 0, 0)]}, 1)
+    s = emu.Scene(pts, tets)
+    s.add_bone("base", lab == 0)
+    s.add_bone("loose", lab == 1, fixed=False)
+    s.add_muscle("m", lab == 2, [1, 0, 0])
+    assert [j["kind"] for j in s.joints()] == ["ball"]
+    for method in ("fem", "emu"):
+        with pytest.warns(emu.NeutralModeWarning, match="bone 'loose' can turn"):
+            sol = emu.Solver(s, method).solve({"m": 0.5}, normalized=True)
+        assert sol.converged, sol.status
+        assert {b for b, _ in sol.neutral_modes} == {"loose"}
+        assert bone_motion(s, sol, "loose").angle_deg < 1e-6
+        m = np.unique(s.tets[s.parts["m"].tets].ravel())
+        assert np.abs(sol.positions[m] - s.points[m]).max() > 1e-3   # the muscle did contract
+
+
+def test_no_neutral_mode_where_muscles_hold_the_bone(small_arm):
+    import warnings as w
+
+    with w.catch_warnings():
+        w.simplefilter("error", emu.NeutralModeWarning)
+        for method in ("fem", "emu"):
+            assert emu.Solver(small_arm, method).solve({"flexor": 0.3}, normalized=True).neutral_modes == []

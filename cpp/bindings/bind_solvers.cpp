@@ -109,6 +109,8 @@ void bind_solvers(py::module_& m) {
       .def_readonly("grad_norm0", &SolveResult::grad_norm0)
       .def_readonly("rel_energy_change", &SolveResult::rel_energy_change)
       .def_readonly("time_s", &SolveResult::time_s)
+      .def_readonly("neutral_bones", &SolveResult::neutral_bones)
+      .def_readonly("neutral_axes", &SolveResult::neutral_axes)
       .def_property_readonly("history", &history_array,
                              "#iterations+1 by 7: iteration, energy, grad_norm, step, time_s, cg_iterations, backtracks");
 

@@ -8,14 +8,14 @@
 """
 from . import _core
 from .scene import Scene, Part, MeshWarning, lame
-from .solve import Solver, Solution, pose_about, rotation, solve
+from .solve import NeutralModeWarning, Solver, Solution, pose_about, rotation, solve
 from .bones import bone_motion, rigid_fit, signed_angle
 from . import activation, bones, fibers, io, meshes, run, scenefile, scenes
 
 __version__ = "0.1.0"
 
 __all__ = ["Scene", "Part", "MeshWarning", "lame", "Solver", "Solution", "solve", "rotation", "pose_about", "io", "meshes", "fibers", "info",
-           "vertex_error", "bone_motion", "rigid_fit", "signed_angle"]
+           "vertex_error", "bone_motion", "rigid_fit", "signed_angle", "NeutralModeWarning"]
 
 
 def info() -> dict:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -9,7 +10,12 @@ import numpy as np
 from . import _core
 from .scene import Scene
 
-__all__ = ["Solver", "Solution", "solve", "rotation", "pose_about", "METHODS", "STEPS"]
+__all__ = ["Solver", "Solution", "solve", "rotation", "pose_about", "METHODS", "STEPS", "NeutralModeWarning"]
+
+
+class NeutralModeWarning(UserWarning):
+    """A movable bone can turn (or slide) with nothing resisting it: its
+    equilibrium is not unique (see Solution.neutral_modes)."""
 
 METHODS = ("emu", "fem")
 STEPS = ("newton-krylov", "woodbury")
@@ -43,6 +49,7 @@ class Solution:
     settings: dict = field(default_factory=dict)
     filtered_steps: int = 0          # iterations that fell back to the PSD-filtered Hessian
     exact_attempts_failed: int = 0   # FEM: factorisations that found the exact Hessian indefinite
+    neutral_modes: list = field(default_factory=list)  # [(bone, unit axis)] turns nothing resists
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
@@ -254,7 +261,18 @@ class Solver:
                         time_s=r.time_s, setup_time_s=self.setup_time_s, energy=r.energy,
                         grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
                         history=history, F=F, settings=settings, filtered_steps=r.filtered_steps,
-                        exact_attempts_failed=r.exact_attempts_failed)
+                        exact_attempts_failed=r.exact_attempts_failed,
+                        neutral_modes=self._neutral_modes(r))
+
+    def _neutral_modes(self, r) -> list:
+        bones = self.scene.movable_bones
+        modes = [(bones[b], np.asarray(a, float)) for b, a in zip(r.neutral_bones, np.asarray(r.neutral_axes))]
+        for bone, axis in modes:
+            warnings.warn(NeutralModeWarning(
+                f"bone '{bone}' can turn about axis {np.round(axis, 3).tolist()} with nothing resisting it (a "
+                "neutral mode): its equilibrium is not unique and that turn was left alone. Fix the bone, add an "
+                "antagonist muscle, gravity, or a joint_stiffness"), stacklevel=3)
+        return modes
 
     def _initial_array(self, initial):
         if isinstance(initial, Solution):

@@ -4,7 +4,9 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
+#include <limits>
 
 #include "emu/energy/material.h"
 
@@ -13,6 +15,8 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
+// The (uniform) diagonal of a bone's block alpha sum w V I.
+double A_diag_of(const std::vector<Mat9>& A, int u) { return A[u](0, 0); }
 
 // Nearest rotation (polar decomposition) of a 3x3 matrix near a rotation.
 Mat3 nearest_rotation(const Mat3& M) {
@@ -380,8 +384,9 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   // fitted positions} (3 per bone) adds Z (Z^T H Z)^-1 Z^T (additive
   // two-level preconditioner; rebuilt with the Woodbury term).
   std::vector<Mat9X> coarse_Z;
-  Eigen::LLT<Eigen::MatrixXd> coarse_E;
+  Eigen::MatrixXd coarse_inv;  // pseudo-inverse of Z^T H Z
   bool coarse_ok = false;
+  std::vector<std::pair<int, Vec3>> neutral;  // bone turns of zero curvature (neutral modes)
   auto build_coarse = [&](const std::vector<Mat9>& Ablocks) {
     const int nz = 3 * disc_.num_bones;
     coarse_Z.assign(nz, Mat9X::Zero(9, nu));
@@ -403,8 +408,26 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       riemannian_product(Ablocks, F, g, coarse_Z[j], false, HZ);
       for (int i = 0; i < nz; ++i) E(i, j) = dot(coarse_Z[i], HZ);
     }
-    coarse_E.compute(0.5 * (E + E.transpose()));
-    coarse_ok = coarse_E.info() == Eigen::Success;
+    // A turn of zero curvature (nothing resists it: a neutral mode) is left
+    // out of the correction and reported. Scale: the curvature of turning the
+    // bone against its own ACAP term, 2 alpha sum_t w_t V_t.
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (E + E.transpose()));
+    double scale = std::numeric_limits<double>::infinity();
+    for (int u = disc_.num_soft; u < nu; ++u) scale = std::min(scale, 2.0 * A_diag_of(Ablocks, u));
+    coarse_inv.setZero(nz, nz);
+    neutral.clear();
+    for (int i = 0; i < nz; ++i) {
+      const Eigen::VectorXd v = es.eigenvectors().col(i);
+      if (es.eigenvalues()(i) > 1e-9 * scale) {
+        coarse_inv += v * v.transpose() / es.eigenvalues()(i);
+        continue;
+      }
+      int best = 0;
+      for (int b = 1; b < disc_.num_bones; ++b)
+        if (v.segment<3>(3 * b).norm() > v.segment<3>(3 * best).norm()) best = b;
+      neutral.push_back({best, v.segment<3>(3 * best).normalized()});
+    }
+    coarse_ok = true;
   };
   auto precondition = [&](const Mat9X& in, Mat9X& out) {
     if (schur_) schur_->apply(in, out);
@@ -414,7 +437,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     if (!coarse_ok) return;
     Eigen::VectorXd zr(coarse_Z.size());
     for (size_t i = 0; i < coarse_Z.size(); ++i) zr(i) = dot(coarse_Z[i], in);
-    const Eigen::VectorXd c = coarse_E.solve(zr);
+    const Eigen::VectorXd c = coarse_inv * zr;
     for (size_t i = 0; i < coarse_Z.size(); ++i) out += c(i) * coarse_Z[i];
   };
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
@@ -548,6 +571,11 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       res.converged = true;
       res.status = "converged";
     }
+  }
+  res.neutral_axes.resize(neutral.size(), 3);
+  for (size_t i = 0; i < neutral.size(); ++i) {
+    res.neutral_bones.push_back(neutral[i].first);
+    res.neutral_axes.row(i) = neutral[i].second.transpose();
   }
   fit_into(c, F, x, Fx);
   res.positions = x;

@@ -355,6 +355,7 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   Eigen::MatrixXd Hsb(nf * 3, nd), Wsb(nf * 3, nd), Hbb(nd, nd);
   Eigen::MatrixX3d trial(x.rows(), 3);
   std::vector<RigidBone> trial_bones;
+  std::vector<std::pair<int, Vec3>> neutral, last_neutral;  // neutral modes of the current / last step
   // Newton direction from the assembled soft block and the bone border.
   // Returns false if the matrix is not positive definite.
   auto newton_direction = [&](bool exact) {
@@ -410,15 +411,39 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
     factor_.solve(Hsb.data(), Wsb.data(), nd);
     Eigen::MatrixXd S = Hbb - Hsb.transpose() * Wsb;
     S = 0.5 * (S + S.transpose()).eval();
+    const Eigen::VectorXd rb = -gb + Hsb.transpose() * y;
     Eigen::LLT<Eigen::MatrixXd> llt(S);
-    if (llt.info() != Eigen::Success || llt.matrixLLT().diagonal().minCoeff() <= 1e-12 * std::sqrt(S.diagonal().maxCoeff())) {
+    if (llt.info() == Eigen::Success &&
+        llt.matrixLLT().diagonal().minCoeff() > 1e-6 * std::sqrt(S.diagonal().maxCoeff())) {
+      db = llt.solve(rb);
+    } else {
       if (exact) return false;
-      // A rotation no tissue resists (a neutral mode): a tiny shift keeps the step finite.
-      S.diagonal().array() += 1e-8 * S.diagonal().maxCoeff();
-      llt.compute(S);
-      if (llt.info() != Eigen::Success) return false;
+      // A bone direction nothing resists (a neutral mode): S is singular there.
+      // Step with its pseudo-inverse (that direction is left alone) and say which.
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(S);
+      const Eigen::VectorXd& lam = es.eigenvalues();
+      const double lmax = lam.cwiseAbs().maxCoeff();
+      db.setZero();
+      neutral.clear();
+      for (int i = 0; i < nd; ++i) {
+        const Eigen::VectorXd vi = es.eigenvectors().col(i);
+        if (lam(i) > 1e-10 * lmax) {
+          db += vi * (vi.dot(rb) / lam(i));
+          continue;
+        }
+        if (lam(i) < -1e-10 * lmax) return false;  // filtered S is PSD up to round-off
+        int best = 0;
+        for (int b = 1; b < nb; ++b)
+          if (vi.segment(bones[b].offset, bones[b].dofs).norm() >
+              vi.segment(bones[best].offset, bones[best].dofs).norm())
+            best = b;
+        const RigidBone& B = bones[best];
+        Vec3 axis = B.kind == BoneKind::Hinge ? B.axis_current : Vec3(vi.segment<3>(B.offset).normalized());
+        if (B.kind == BoneKind::Free && vi.segment<3>(B.offset).norm() < vi.segment<3>(B.offset + 3).norm())
+          axis = vi.segment<3>(B.offset + 3).normalized();  // free to slide, not turn
+        neutral.push_back({best, axis});
+      }
     }
-    db = llt.solve(-gb + Hsb.transpose() * y);
     ds = -y - Wsb * db;
     return true;
   };
@@ -465,6 +490,8 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
       }
     }
     const double slope = gs.dot(ds) + (nd ? gb.dot(db) : 0.0);
+    last_neutral = have ? std::vector<std::pair<int, Vec3>>() : neutral;
+    neutral.clear();
     if (!(slope < 0)) {
       res.status = "Newton direction is not a descent direction";
       break;
@@ -512,6 +539,11 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
       res.converged = true;
       res.status = "converged";
     }
+  }
+  res.neutral_axes.resize(last_neutral.size(), 3);
+  for (size_t i = 0; i < last_neutral.size(); ++i) {
+    res.neutral_bones.push_back(last_neutral[i].first);
+    res.neutral_axes.row(i) = last_neutral[i].second.transpose();
   }
   res.positions = x;
   res.energy = E;

@@ -63,6 +63,11 @@ struct SolveResult {
   double energy = 0, grad_norm = 0, grad_norm0 = 0, rel_energy_change = 0;
   double time_s = 0;  // solve time (setup excluded)
   std::vector<IterationRecord> history;  // entry 0 is the initial state
+  // Neutral modes met on the way: movable bone ids and unit rotation axes
+  // (rows) about which nothing resisted the bone's turn (no curvature of the
+  // energy); the step left those rotations alone.
+  std::vector<int> neutral_bones;
+  Eigen::MatrixX3d neutral_axes;
 };
 
 /// The scale-aware stopping test. Energies carry no rest offset, so relative
