@@ -15,8 +15,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
-// The (uniform) diagonal of a bone's block alpha sum w V I.
-double A_diag_of(const std::vector<Mat9>& A, int u) { return A[u](0, 0); }
 
 // Nearest rotation (polar decomposition) of a 3x3 matrix near a rotation.
 Mat3 nearest_rotation(const Mat3& M) {
@@ -410,10 +408,17 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     }
     // A turn of zero curvature (nothing resists it: a neutral mode) is left
     // out of the correction and reported. Scale: the curvature of turning the
-    // bone against its own ACAP term, 2 alpha sum_t w_t V_t.
+    // bone's volume against an ACAP term of weight 1, 2 alpha sum_t V_t (not the
+    // bone's own, much larger, weight: a soft but real resistance, such as a
+    // muscle's torsion, must not count as none).
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (E + E.transpose()));
     double scale = std::numeric_limits<double>::infinity();
-    for (int u = disc_.num_soft; u < nu; ++u) scale = std::min(scale, 2.0 * A_diag_of(Ablocks, u));
+    for (int u = disc_.num_soft; u < nu; ++u) {
+      double vol = 0;
+      for (int i = disc_.unknown_ptr[u]; i < disc_.unknown_ptr[u + 1]; ++i)
+        vol += disc_.geometry.volume(disc_.unknown_tets[i]);
+      scale = std::min(scale, 2.0 * emu_.alpha * vol);
+    }
     coarse_inv.setZero(nz, nz);
     neutral.clear();
     for (int i = 0; i < nz; ++i) {
