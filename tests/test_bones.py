@@ -482,3 +482,18 @@ def test_no_neutral_mode_where_muscles_hold_the_bone(small_arm):
         w.simplefilter("error", emu.NeutralModeWarning)
         for method in ("fem", "emu"):
             assert emu.Solver(small_arm, method).solve({"flexor": 0.3}, normalized=True).neutral_modes == []
+
+
+@pytest.mark.parametrize("method", ["fem", "emu"])
+def test_movable_bone_follows_a_scripted_parent(small_arm, method):
+    """Scripting the humerus (turning the whole upper arm about its top) carries
+    the elbow hinge with it; with the muscles relaxed the rest pose is the
+    equilibrium, so the forearm turns rigidly with it."""
+    s = small_arm
+    top = s.points[:, 1].max()
+    R, t = emu.pose_about([0, 0, 1], 20, [0, top, 0])
+    sol = emu.Solver(s, method).solve({}, bone_poses={"humerus": (R, t)})
+    assert sol.converged, sol.status
+    bm = bone_motion(s, sol, "forearm")
+    np.testing.assert_allclose(bm.R, R, atol=1e-6)
+    np.testing.assert_allclose(sol.positions, s.points @ R.T + t, atol=1e-6 * top)
