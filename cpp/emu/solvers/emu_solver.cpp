@@ -381,13 +381,14 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   // correction over Z = {turn bone b about axis k, soft F_t following the
   // fitted positions} (3 per bone) adds Z (Z^T H Z)^-1 Z^T (additive
   // two-level preconditioner; rebuilt with the Woodbury term).
-  std::vector<Mat9X> coarse_Z;
+  std::vector<Mat9X> coarse_Z, coarse_HZ;
   Eigen::MatrixXd coarse_inv;  // pseudo-inverse of Z^T H Z
-  bool coarse_ok = false;
+  bool coarse_ok = false, balancing = false;
   std::vector<std::pair<int, Vec3>> neutral;  // bone turns of zero curvature (neutral modes)
-  auto build_coarse = [&](const std::vector<Mat9>& Ablocks) {
+  auto build_coarse = [&](const std::vector<Mat9>& Ablocks, bool curvature) {
     const int nz = 3 * disc_.num_bones;
     coarse_Z.assign(nz, Mat9X::Zero(9, nu));
+    coarse_HZ.resize(nz);
     Eigen::MatrixX3d dxk;
     Mat9X Fdk, HZ;
     for (int b = 0; b < disc_.num_bones; ++b)
@@ -403,8 +404,8 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       }
     Eigen::MatrixXd E(nz, nz);
     for (int j = 0; j < nz; ++j) {
-      riemannian_product(Ablocks, F, g, coarse_Z[j], false, HZ);
-      for (int i = 0; i < nz; ++i) E(i, j) = dot(coarse_Z[i], HZ);
+      riemannian_product(Ablocks, F, g, coarse_Z[j], curvature, coarse_HZ[j]);
+      for (int i = 0; i < nz; ++i) E(i, j) = dot(coarse_Z[i], coarse_HZ[j]);
     }
     // A turn of zero curvature (nothing resists it: a neutral mode) is left
     // out of the correction and reported. Scale: the curvature of turning the
@@ -421,12 +422,15 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     }
     coarse_inv.setZero(nz, nz);
     neutral.clear();
+    balancing = true;
     for (int i = 0; i < nz; ++i) {
       const Eigen::VectorXd v = es.eigenvectors().col(i);
       if (es.eigenvalues()(i) > 1e-9 * scale) {
         coarse_inv += v * v.transpose() / es.eigenvalues()(i);
         continue;
       }
+      balancing = false;
+      if (es.eigenvalues()(i) < -1e-9 * scale) continue;  // negative curvature: not a neutral mode
       int best = 0;
       for (int b = 1; b < disc_.num_bones; ++b)
         if (v.segment<3>(3 * b).norm() > v.segment<3>(3 * best).norm()) best = b;
@@ -434,16 +438,32 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
     }
     coarse_ok = true;
   };
+  Mat9X r1;
   auto precondition = [&](const Mat9X& in, Mat9X& out) {
+    const size_t nz = coarse_Z.size();
+    if (bones && coarse_ok && balancing) {
+      // Balancing: M^-1 r = Q r + (I - Q H) B (I - H Q) r, Q = Z E^-1 Z^T.
+      Eigen::VectorXd zr(nz);
+      for (size_t i = 0; i < nz; ++i) zr(i) = dot(coarse_Z[i], in);
+      const Eigen::VectorXd c1 = coarse_inv * zr;
+      r1 = in;
+      for (size_t i = 0; i < nz; ++i) r1 -= c1(i) * coarse_HZ[i];
+      woodbury_->apply(r1, out);
+      project_tangent(F, out);
+      for (size_t i = 0; i < nz; ++i) zr(i) = dot(coarse_HZ[i], out);
+      const Eigen::VectorXd c2 = coarse_inv * zr;
+      for (size_t i = 0; i < nz; ++i) out += (c1(i) - c2(i)) * coarse_Z[i];
+      return;
+    }
     if (schur_) schur_->apply(in, out);
     else woodbury_->apply(in, out);
     if (!bones) return;
     project_tangent(F, out);
     if (!coarse_ok) return;
-    Eigen::VectorXd zr(coarse_Z.size());
-    for (size_t i = 0; i < coarse_Z.size(); ++i) zr(i) = dot(coarse_Z[i], in);
+    Eigen::VectorXd zr(nz);
+    for (size_t i = 0; i < nz; ++i) zr(i) = dot(coarse_Z[i], in);
     const Eigen::VectorXd c = coarse_inv * zr;
-    for (size_t i = 0; i < coarse_Z.size(); ++i) out += c(i) * coarse_Z[i];
+    for (size_t i = 0; i < nz; ++i) out += c(i) * coarse_Z[i];
   };
   for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
     if (options_.interrupted && options_.interrupted()) {
@@ -464,12 +484,14 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
       } else {
         woodbury_->update(A);
       }
-      if (bones && emu_.bone_coarse_space) build_coarse(A);
       since_refresh = 0;
       cg_after_refresh = -1;
     } else {
       blocks_into(c, F, nullptr, &A_exact);
     }
+    // The coarse space follows the Hessian CG uses (rebuilt every step: 3 fits
+    // and 3 products per bone).
+    if (bones && emu_.bone_coarse_space) build_coarse(exact ? A_exact : A, exact);
     ++since_refresh;
     int cg_its = 0;
     if (emu_.step == EmuStep::Woodbury) {
