@@ -2,7 +2,7 @@
 
     emu demo [--out DIR] [--resolution R] [--frames N] [--alpha A] [--no-fem] [--threads T]
     emu compare [--out DIR] [--tets N] [--threads T] [--woodbury]
-    emu solve MESH --activation NAME=A [NAME=A ...] [--method emu|fem] [--out FILE.vtu]
+    emu solve MESH --activation NAME=A [NAME=A ...] [--free-bones BONE ...] [--method emu|fem] [--out FILE.vtu]
     emu run SCENE.toml [--out DIR]
     emu info [MESH]
 """
@@ -157,7 +157,7 @@ def _solve(args):
 
     if args.threads:
         emu._core.set_threads(args.threads)
-    scene = emu.io.load_scene(args.mesh)
+    scene = emu.io.load_scene(args.mesh, free_bones=args.free_bones or ())
     print(scene)
     act = _parse_activation(args.activation)
     kw = dict(alpha=args.alpha, step=args.step) if args.method == "emu" else {}
@@ -204,8 +204,9 @@ def main(argv=None):
     d.add_argument("--threads", type=int, default=None)
     d.add_argument("--woodbury", action="store_true", help="also run the paper's Woodbury quasi-Newton step")
     d.set_defaults(func=_compare)
-    s = sub.add_parser("solve", help="solve a labelled mesh (fixed bones pinned) at one activation")
+    s = sub.add_parser("solve", help="solve a labelled mesh at one activation (bones fixed unless --free-bones)")
     s.add_argument("mesh")
+    s.add_argument("--free-bones", nargs="*", metavar="BONE", help="bones the muscles move")
     s.add_argument("--activation", nargs="*", help="NAME=VALUE absolute activations")
     s.add_argument("--method", choices=["emu", "fem"], default="emu")
     s.add_argument("--step", choices=["newton-krylov", "woodbury"], default="newton-krylov")
