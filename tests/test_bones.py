@@ -497,3 +497,16 @@ def test_movable_bone_follows_a_scripted_parent(small_arm, method):
     bm = bone_motion(s, sol, "forearm")
     np.testing.assert_allclose(bm.R, R, atol=1e-6)
     np.testing.assert_allclose(sol.positions, s.points @ R.T + t, atol=1e-6 * top)
+
+
+def test_gravity_on_a_movable_bone():
+    """The relaxed arm under gravity: the forearm droops (turns down about the
+    elbow) until the muscles hold it; FEM and EMU agree."""
+    s = arm(1)
+    s.gravity = np.array([0.0, -9.81, 0.0])
+    angles = {}
+    for method in ("fem", "emu"):
+        sol = emu.Solver(s, method).solve({})
+        assert sol.converged, sol.status
+        angles[method] = signed_angle(bone_motion(s, sol, "forearm").R, [0, 0, 1])
+    assert angles["fem"] < -1.0 and abs(angles["emu"] - angles["fem"]) < 0.5, angles
