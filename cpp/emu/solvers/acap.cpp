@@ -23,7 +23,17 @@ void expand_unknowns(const Discretization& disc, const Mat9X& U, Mat9X& out) {
   for (Eigen::Index t = 0; t < m; ++t) out.col(t) = U.col(disc.owner(t));
 }
 
-void reduce_to_unknowns(const Discretization& disc, const Mat9X& per_tet, Mat9X& out) {
+const Mat9X& per_tet_view(const Discretization& disc, const Mat9X& U, Mat9X& buf) {
+  if (disc.num_bones == 0) return U;
+  expand_unknowns(disc, U, buf);
+  return buf;
+}
+
+void reduce_to_unknowns(const Discretization& disc, Mat9X& per_tet, Mat9X& out) {
+  if (disc.num_bones == 0) {
+    out.swap(per_tet);
+    return;
+  }
   const long nu = disc.num_unknowns;
   out.resize(9, nu);
 #pragma omp parallel for schedule(dynamic, 256)
@@ -203,10 +213,13 @@ void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const {
 
 void AcapOperator::fit(const Mat9X& F, const Mat9X* F_pinned, const Eigen::MatrixX3d* h, Eigen::MatrixX3d& x) const {
   // Normal equations: K z = C (F - F_t(x_pinned)), J q = h.
-  Mat9X target = F;
-  if (F_pinned) target -= *F_pinned;
   Eigen::MatrixX3d R;
-  apply_C(target, R);
+  if (F_pinned) {
+    const Mat9X target = F - *F_pinned;
+    apply_C(target, R);
+  } else {
+    apply_C(F, R);
+  }
   Eigen::MatrixXd Z, hd;
   if (h) hd = *h;
   solve_with(R, h ? &hd : nullptr, Z);

@@ -39,8 +39,12 @@ void deformation_gradients(const Discretization& disc, const Eigen::MatrixX4i& T
 
 /// Per-tet copies of the EMU unknowns: out.col(t) = U.col(owner(t)). U: 9 x #unknowns.
 void expand_unknowns(const Discretization& disc, const Mat9X& U, Mat9X& out);
-/// Sums of per-tet columns into their unknowns (fixed order). per_tet: 9 x #T.
-void reduce_to_unknowns(const Discretization& disc, const Mat9X& per_tet, Mat9X& out);
+/// The per-tet view of unknowns U: U itself when every unknown is one tet (no
+/// bones: no copy), else U expanded into buf.
+const Mat9X& per_tet_view(const Discretization& disc, const Mat9X& U, Mat9X& buf);
+/// Sums of per-tet columns into their unknowns (fixed order). per_tet: 9 x #T;
+/// without bones it is moved into out (no copy) and left empty.
+void reduce_to_unknowns(const Discretization& disc, Mat9X& per_tet, Mat9X& out);
 
 class AcapOperator {
  public:

@@ -100,18 +100,16 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
 }
 
 void EmuSolver::fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const {
-  Mat9X Ft;
-  expand_unknowns(disc_, F, Ft);
+  Mat9X buf;
   x = c.x_pinned;
-  acap_->fit(Ft, &c.F_pinned, &c.h, x);
+  acap_->fit(per_tet_view(disc_, F, buf), &c.F_pinned, &c.h, x);
   deformation_gradients(disc_, model_.tets, x, Fx);
 }
 
 void EmuSolver::fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const {
-  Mat9X Dt;
-  expand_unknowns(disc_, D, Dt);
+  Mat9X buf;
   dx.setZero(model_.rest.rows(), 3);
-  acap_->fit(Dt, nullptr, nullptr, dx);
+  acap_->fit(per_tet_view(disc_, D, buf), nullptr, nullptr, dx);
   deformation_gradients(disc_, model_.tets, dx, Fd);
 }
 
@@ -239,6 +237,12 @@ void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v,
   fit_linear_into(v, dx, Fd);
   const auto& wv = acap_->weight_volume();
   const Eigen::Index m = model_.tets.rows();
+  if (disc_.num_bones == 0) {  // one unknown per tet: one fused pass
+    out.resize(9, m);
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index t = 0; t < m; ++t) out.col(t) = A[t] * v.col(t) - (emu_.alpha * wv(t)) * Fd.col(t);
+    return;
+  }
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) Fd.col(t) *= emu_.alpha * wv(t);
   reduce_to_unknowns(disc_, Fd, out);

@@ -86,9 +86,8 @@ void Woodbury::apply(const Mat9X& r, Mat9X& out) const {
   if (!x_ok_ || ks_ == 0) return;
   // s = X^-1 B z with B z = Psi^T (C z): entry c + 3 l is (Psi^T y)(l, c).
   Mat9X per_tet;
-  expand_unknowns(disc_, out, per_tet);
   Eigen::MatrixX3d y;
-  acap_.apply_C(per_tet, y);
+  acap_.apply_C(per_tet_view(disc_, out, per_tet), y);
   const Eigen::MatrixXd Bz = psi_.transpose() * y;  // ks x 3
   Eigen::VectorXd t(3 * ks_);
   for (int l = 0; l < ks_; ++l)
