@@ -501,11 +501,11 @@ def fetch(name=None, *, progress=None, force=False) -> dict:
     return {n: path(n, progress=progress, force=force) for n in todo}
 
 
-def fetch_main(names_=None, progress=print) -> int:
+def fetch_main(names=None, progress=print) -> int:
     """For the command line (``emu data [NAME...]``): fetch the named scenes
     (all when none), say what was fetched and where; returns an exit status
     (0, or 1 with the error on stderr)."""
-    todo = list(names_) if names_ else None
+    todo = list(names) if names else None
     try:
         paths = fetch(todo, progress=progress)
     except (DatasetError, ImportError) as e:
