@@ -73,7 +73,7 @@ def test_emu_bone_derivatives_match_finite_differences(small_arm):
     core = solver._core
     load = solver.load_case({"flexor": 0.5, "extensor": 0.2}, normalized=True, gravity=[0, -9.81, 0])
     nu = core.num_unknowns
-    assert nu == (core.unknown_of_tet.max() + 1)
+    assert nu == (core.tet_unknown.max() + 1)
     rng = np.random.default_rng(3)
     F = np.tile(np.eye(3).ravel(), (nu, 1)) + 0.02 * rng.standard_normal((nu, 9))
     for only_bone in (False, True):
@@ -430,7 +430,7 @@ def test_bone_fit_matches_a_dense_constrained_least_squares():
     rng = np.random.default_rng(11)
     nu = core.num_unknowns
     Fu = np.tile(np.eye(3).ravel(), (nu, 1)) + 0.05 * rng.standard_normal((nu, 9))
-    Ft = Fu[np.asarray(core.unknown_of_tet)]            # per tet, vec column-major
+    Ft = Fu[np.asarray(core.tet_unknown)]            # per tet, vec column-major
     D = np.repeat(w, 9)
     M = G @ S
     rhs = Ft.ravel() - G @ x0

@@ -132,6 +132,21 @@ void bind_solvers(py::module_& m) {
           py::arg("load"), py::arg("x0"))
       .def("energy", &FemSolver::energy, py::arg("load"), py::arg("x"), gil())
       .def("gradient", &FemSolver::gradient, py::arg("load"), py::arg("x"), gil())
+      .def("reduced_energy", &FemSolver::reduced_energy, py::arg("load"), py::arg("x0"), py::arg("z"), gil(),
+           "Energy at increment z of the reduced unknowns (free soft displacements, bone increments) about x0")
+      .def(
+          "reduced_system",
+          [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0, bool exact) {
+            Eigen::VectorXd g;
+            Eigen::MatrixXd H;
+            {
+              py::gil_scoped_release release;
+              s.reduced_system(l, x0, exact, g, H);
+            }
+            return py::make_tuple(g, H);
+          },
+          py::arg("load"), py::arg("x0"), py::arg("exact") = true,
+          "(gradient, dense Hessian) of the reduced unknowns at x0 (small meshes only)")
       .def_property_readonly("setup_seconds", &FemSolver::setup_seconds)
       .def_property_readonly("factor_nnz", &FemSolver::factor_nnz);
 
@@ -162,7 +177,7 @@ void bind_solvers(py::module_& m) {
       .def("mode_values", &EmuSolver::mode_values)
       .def_property_readonly("modes", &EmuSolver::modes)
       .def_property_readonly("num_unknowns", &EmuSolver::num_unknowns)
-      .def_property_readonly("unknown_of_tet", &EmuSolver::unknown_of_tet)
+      .def_property_readonly("tet_unknown", &EmuSolver::tet_unknown, "#T: the F unknown each tet uses (soft tets in order, then one per movable bone)")
       .def_property_readonly("alpha", &EmuSolver::alpha)
       .def_property_readonly("factor_seconds", &EmuSolver::factor_seconds)
       .def_property_readonly("modes_seconds", &EmuSolver::modes_seconds)

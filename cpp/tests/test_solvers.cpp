@@ -66,7 +66,7 @@ LoadCase load(double a) {
 
 TEST(block_assembly_matches_dense_assembly) {
   const Model m = bar(2, 3);
-  Discretization d(m);
+  UnknownLayout d(m);
   BlockPattern pat(m.tets, d.free_index, d.num_free, 3);
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(-1, 1);
@@ -148,7 +148,7 @@ TEST(emu_gradient_matches_energy) {
 
 TEST(emu_with_all_modes_inverts_the_exact_hessian) {
   const Model m = bar(1, 2);
-  Discretization d(m);
+  UnknownLayout d(m);
   EmuOptions eo;
   eo.alpha = 50 * m.mu(0);
   eo.modes = 3 * d.num_free;  // every mode: the Woodbury inverse is exact

@@ -40,4 +40,15 @@ inline Mat9 material_hessian(const TetMaterial& m, const Mat3& F) {
   return H;
 }
 
+/// Both Hessians from one Neo-Hookean evaluation: the PSD-filtered one into
+/// *psd and the unfiltered one into *exact (either may be nullptr). The same
+/// numbers as material_hessian_psd and material_hessian.
+inline void material_hessians(const TetMaterial& m, const Mat3& F, EigenFilter filter, Mat9* psd, Mat9* exact) {
+  const Mat9 H = snh::hessian(F, m.mu, m.lambda);
+  Mat9 fib = Mat9::Zero();
+  if (m.activation != 0.0) fib = fiber::hessian(m.fiber, m.activation);
+  if (psd) *psd = psd_project<9>(H, filter) + fib;
+  if (exact) *exact = H + fib;
+}
+
 }  // namespace emu

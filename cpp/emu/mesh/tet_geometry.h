@@ -24,6 +24,11 @@ struct TetGeometry {
 /// Throws std::invalid_argument if a tet has non-positive volume.
 TetGeometry tet_geometry(const Eigen::MatrixX3d& X, const Eigen::MatrixX4i& T);
 
+/// The length of the diagonal of the axis-aligned bounding box of points X (#V by 3).
+inline double bbox_diagonal(const Eigen::MatrixX3d& X) {
+  return (X.colwise().maxCoeff() - X.colwise().minCoeff()).norm();
+}
+
 /// Signed volumes, #T (negative: wrong vertex order).
 Eigen::VectorXd signed_volumes(const Eigen::MatrixX3d& X, const Eigen::MatrixX4i& T);
 

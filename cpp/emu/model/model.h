@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 
+#include "emu/energy/material.h"
 #include "emu/mesh/tet_geometry.h"
 
 namespace emu {
@@ -50,45 +51,18 @@ struct LoadCase {
   Eigen::MatrixX3d joint_targets;  // #J by 3 where declared world joints are (empty: rest)
 };
 
-/// A point of a movable bone that something else also places: a vertex it
-/// shares with a pinned vertex (fixed or scripted bone, user pin; other = -1)
-/// or with another movable bone (other = that bone, which owns the vertex's
-/// position), or a declared joint point (vertex = -1, declared = its row).
-struct JointPoint {
-  Eigen::Vector3d rest;
-  int vertex, bone, other, declared;
-};
-
-/// Derived, immutable data shared by the solvers.
-struct Discretization {
-  TetGeometry geometry;
-  // #V index among free soft vertices (the per-vertex unknowns), -1 for pinned
-  // vertices and for vertices that move with a bone
-  Eigen::VectorXi free_index;
-  int num_free = 0;
-  Eigen::VectorXd lumped_mass;  // #V
-  // Bones. vertex_bone: #V bone that places the vertex (lowest bone id if it is
-  // shared; -1 for soft and pinned vertices).
-  int num_bones = 0;
-  Eigen::VectorXi vertex_bone;
-  Eigen::MatrixX3d bone_center;        // num_bones by 3 rest centroids of each bone's vertices
-  std::vector<JointPoint> joints;
-  // EMU unknowns: one per soft tet (in tet order), then one per bone.
-  // owner: #T unknown of each tet; unknown_ptr/unknown_tets: the tets of each
-  // unknown (CSR).
-  int num_unknowns = 0, num_soft = 0;
-  Eigen::VectorXi owner;
-  std::vector<int> unknown_ptr, unknown_tets;
-  bool is_bone_tet(Eigen::Index t) const { return owner(t) >= num_soft; }
-  explicit Discretization(const Model& model);
-};
-
 /// Full #V by 3 positions: free rows from x_free (num_free by 3), pinned rows
 /// from the load case (or rest).
 Eigen::MatrixX3d pinned_positions(const Model& model, const LoadCase& load);
 
 /// Activation per tet (0 where a tet belongs to no muscle).
 Eigen::VectorXd tet_activation(const Model& model, const LoadCase& load);
+
+/// The material of soft tet t under per-tet activations act (#T): the one
+/// place a tet's Lame parameters, activation and fibre are put together.
+inline TetMaterial tet_material(const Model& model, const Eigen::VectorXd& act, Eigen::Index t) {
+  return {model.mu(t), model.lambda(t), act(t), model.fiber.row(t).transpose()};
+}
 
 void validate_load(const Model& model, const LoadCase& load);
 

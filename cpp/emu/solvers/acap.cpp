@@ -8,66 +8,66 @@
 
 namespace emu {
 
-void deformation_gradients(const Discretization& disc, const Eigen::MatrixX4i& T,
+void deformation_gradients(const UnknownLayout& layout, const Eigen::MatrixX4i& T,
                            const Eigen::MatrixX3d& x, Mat9X& out) {
   const Eigen::Index m = T.rows();
   out.resize(9, m);
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t) out.col(t) = flatten(deformation_gradient(disc.geometry.grad[t], x, T, t));
+  for (Eigen::Index t = 0; t < m; ++t) out.col(t) = flatten(deformation_gradient(layout.geometry.grad[t], x, T, t));
 }
 
-void expand_unknowns(const Discretization& disc, const Mat9X& U, Mat9X& out) {
-  const Eigen::Index m = disc.owner.size();
+void expand_unknowns(const UnknownLayout& layout, const Mat9X& U, Mat9X& out) {
+  const Eigen::Index m = layout.tet_unknown.size();
   out.resize(9, m);
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t) out.col(t) = U.col(disc.owner(t));
+  for (Eigen::Index t = 0; t < m; ++t) out.col(t) = U.col(layout.tet_unknown(t));
 }
 
-const Mat9X& per_tet_view(const Discretization& disc, const Mat9X& U, Mat9X& buf) {
-  if (disc.num_bones == 0) return U;
-  expand_unknowns(disc, U, buf);
+const Mat9X& per_tet_view(const UnknownLayout& layout, const Mat9X& U, Mat9X& buf) {
+  if (layout.num_bones == 0) return U;
+  expand_unknowns(layout, U, buf);
   return buf;
 }
 
-void reduce_to_unknowns(const Discretization& disc, Mat9X& per_tet, Mat9X& out) {
-  if (disc.num_bones == 0) {
+void reduce_to_unknowns(const UnknownLayout& layout, Mat9X& per_tet, Mat9X& out) {
+  if (layout.num_bones == 0) {
     out.swap(per_tet);
     return;
   }
-  const long nu = disc.num_unknowns;
+  const long nu = layout.num_unknowns;
   out.resize(9, nu);
 #pragma omp parallel for schedule(dynamic, 256)
   for (long u = 0; u < nu; ++u) {
     Vec9 s = Vec9::Zero();
-    for (int i = disc.unknown_ptr[u]; i < disc.unknown_ptr[u + 1]; ++i) s += per_tet.col(disc.unknown_tets[i]);
+    for (int i = layout.unknown_ptr[u]; i < layout.unknown_ptr[u + 1]; ++i) s += per_tet.col(layout.unknown_tets[i]);
     out.col(u) = s;
   }
 }
 
 namespace {
-Eigen::Vector4d phi_at(const Discretization& disc, const Eigen::Vector3d& X, int b) {
+Eigen::Vector4d phi_at(const UnknownLayout& layout, const Eigen::Vector3d& X, int b) {
   Eigen::Vector4d p;
-  p.head<3>() = X - disc.bone_center.row(b).transpose();
+  p.head<3>() = X - layout.bone_center.row(b).transpose();
   p(3) = 1.0;
   return p;
 }
-Eigen::Vector4d phi_of(const Model& model, const Discretization& disc, int v, int b) {
-  return phi_at(disc, model.rest.row(v).transpose(), b);
+Eigen::Vector4d phi_of(const Model& model, const UnknownLayout& layout, int v, int b) {
+  return phi_at(layout, model.rest.row(v).transpose(), b);
 }
 }  // namespace
 
-AcapOperator::AcapOperator(const Model& model, const Discretization& disc)
-    : model_(model), disc_(disc), pattern_(model.tets, disc.free_index, disc.num_free, 1) {
+AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout)
+    : model_(model), layout_(layout), pattern_(model.tets, layout.free_index, layout.num_free, 1) {
   const Eigen::Index m = model.tets.rows();
-  ns_ = disc.num_free;
-  nq_ = 4 * disc.num_bones;
+  ns_ = layout.num_free;
+  nq_ = 4 * layout.num_bones;
   if (ns_ == 0)
     throw std::invalid_argument("the model has no free soft vertex: every vertex is pinned or on a bone");
-  wv_ = model.acap_weight.cwiseProduct(disc.geometry.volume);
+  wv_ = model.acap_weight.cwiseProduct(layout.geometry.volume);
   std::vector<double> element(m * 16);
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
-    const ShapeGrads& b = disc.geometry.grad[t];
+    const ShapeGrads& b = layout.geometry.grad[t];
     Eigen::Map<Eigen::Matrix4d>(element.data() + t * 16) = wv_(t) * b * b.transpose();
   }
   std::vector<double> values(pattern_.nnz());
@@ -84,7 +84,7 @@ AcapOperator::AcapOperator(const Model& model, const Discretization& disc)
 
 void AcapOperator::setup_bones() {
   const Eigen::Index m = model_.tets.rows();
-  const auto& vb = disc_.vertex_bone;
+  const auto& vb = layout_.vertex_bone;
   for (Eigen::Index t = 0; t < m; ++t)
     for (int a = 0; a < 4; ++a) {
       const int v = model_.tets(t, a);
@@ -94,7 +94,7 @@ void AcapOperator::setup_bones() {
     }
   bone_corner_phi_.resize(4, bone_corner_.size());
   for (size_t i = 0; i < bone_corner_.size(); ++i)
-    bone_corner_phi_.col(i) = phi_of(model_, disc_, model_.tets(bone_corner_[i] / 4, bone_corner_[i] % 4),
+    bone_corner_phi_.col(i) = phi_of(model_, layout_, model_.tets(bone_corner_[i] / 4, bone_corner_[i] % 4),
                                      bone_corner_bone_[i]);
   // Coupling L_sb and bone block L_bb from the element matrices w V b_a . b_c.
   Eigen::MatrixXd Lsb = Eigen::MatrixXd::Zero(ns_, nq_), Lbb = Eigen::MatrixXd::Zero(nq_, nq_);
@@ -102,18 +102,18 @@ void AcapOperator::setup_bones() {
     bool touches = false;
     for (int a = 0; a < 4; ++a) touches |= vb(model_.tets(t, a)) >= 0;
     if (!touches) continue;
-    const ShapeGrads& b = disc_.geometry.grad[t];
+    const ShapeGrads& b = layout_.geometry.grad[t];
     for (int a = 0; a < 4; ++a) {
       const int va = model_.tets(t, a);
       for (int c = 0; c < 4; ++c) {
         const int vc = model_.tets(t, c);
         if (vb(vc) < 0) continue;
         const double e = wv_(t) * b.row(a).dot(b.row(c));
-        const Eigen::Vector4d pc = phi_of(model_, disc_, vc, vb(vc));
-        if (disc_.free_index(va) >= 0) {
-          Lsb.block<1, 4>(disc_.free_index(va), 4 * vb(vc)) += e * pc.transpose();
+        const Eigen::Vector4d pc = phi_of(model_, layout_, vc, vb(vc));
+        if (layout_.free_index(va) >= 0) {
+          Lsb.block<1, 4>(layout_.free_index(va), 4 * vb(vc)) += e * pc.transpose();
         } else if (vb(va) >= 0) {
-          Lbb.block<4, 4>(4 * vb(va), 4 * vb(vc)) += e * phi_of(model_, disc_, va, vb(va)) * pc.transpose();
+          Lbb.block<4, 4>(4 * vb(va), 4 * vb(vc)) += e * phi_of(model_, layout_, va, vb(va)) * pc.transpose();
         }
       }
     }
@@ -123,12 +123,12 @@ void AcapOperator::setup_bones() {
   Sb_ = Lbb - Lsb.transpose() * W_;
   Sb_ = 0.5 * (Sb_ + Sb_.transpose()).eval();
   // Joint rows.
-  const int nj = static_cast<int>(disc_.joints.size());
+  const int nj = static_cast<int>(layout_.joints.size());
   J_ = Eigen::MatrixXd::Zero(nj, nq_);
   for (int r = 0; r < nj; ++r) {
-    const JointPoint& j = disc_.joints[r];
-    J_.block<1, 4>(r, 4 * j.bone) += phi_at(disc_, j.rest, j.bone).transpose();
-    if (j.other >= 0) J_.block<1, 4>(r, 4 * j.other) -= phi_at(disc_, j.rest, j.other).transpose();
+    const JointPoint& j = layout_.joints[r];
+    J_.block<1, 4>(r, 4 * j.bone) += phi_at(layout_, j.rest, j.bone).transpose();
+    if (j.other >= 0) J_.block<1, 4>(r, 4 * j.other) -= phi_at(layout_, j.rest, j.other).transpose();
   }
   Eigen::MatrixXd V;
   rank_ = 0;
@@ -156,9 +156,9 @@ void AcapOperator::setup_bones() {
 }
 
 Eigen::MatrixX3d AcapOperator::joint_targets(const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& declared) const {
-  Eigen::MatrixX3d h = Eigen::MatrixX3d::Zero(disc_.joints.size(), 3);
-  for (size_t r = 0; r < disc_.joints.size(); ++r) {
-    const JointPoint& j = disc_.joints[r];
+  Eigen::MatrixX3d h = Eigen::MatrixX3d::Zero(layout_.joints.size(), 3);
+  for (size_t r = 0; r < layout_.joints.size(); ++r) {
+    const JointPoint& j = layout_.joints[r];
     if (j.other >= 0) continue;
     if (j.vertex >= 0) h.row(r) = x.row(j.vertex);
     else h.row(r) = declared.rows() ? Eigen::RowVector3d(declared.row(j.declared)) : Eigen::RowVector3d(j.rest.transpose());
@@ -188,19 +188,19 @@ void AcapOperator::solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h
 
 namespace {
 template <class TargetOf>
-void corner_targets(const Eigen::VectorXd& wv, const Discretization& disc, TargetOf&& target, double* corner) {
+void corner_targets(const Eigen::VectorXd& wv, const UnknownLayout& layout, TargetOf&& target, double* corner) {
   const Eigen::Index m = wv.size();
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
     const Mat3 T = target(t);
-    const ShapeGrads& b = disc.geometry.grad[t];
+    const ShapeGrads& b = layout.geometry.grad[t];
     for (int a = 0; a < 4; ++a) Eigen::Map<Vec3>(corner + t * 12 + 3 * a) = wv(t) * T * b.row(a).transpose();
   }
 }
 }  // namespace
 
 void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const {
-  corner_targets(wv_, disc_, [&](Eigen::Index t) { return Mat3(unflatten(D.col(t))); }, corner_.data());
+  corner_targets(wv_, layout_, [&](Eigen::Index t) { return Mat3(unflatten(D.col(t))); }, corner_.data());
   pattern_.gather(corner_.data(), 3, rhs_rows_.data());
   R.resize(dofs(), 3);
   R.topRows(ns_) = rhs_rows_;
@@ -227,31 +227,31 @@ void AcapOperator::fit(const Mat9X& F, const Mat9X* F_pinned, const Eigen::Matri
 }
 
 template <class M>
-static void expand_impl(const Model& model, const Discretization& disc, int ns, const M& Z, M& x) {
+static void expand_impl(const Model& model, const UnknownLayout& layout, int ns, const M& Z, M& x) {
   const Eigen::Index n = x.rows();
   const int nc = static_cast<int>(Z.cols());
 #pragma omp parallel for schedule(static)
   for (Eigen::Index v = 0; v < n; ++v) {
-    if (disc.free_index(v) >= 0) {
-      x.row(v) = Z.row(disc.free_index(v));
-    } else if (disc.vertex_bone(v) >= 0) {
-      const int b = disc.vertex_bone(v);
-      x.row(v) = phi_of(model, disc, static_cast<int>(v), b).transpose() * Z.block(ns + 4 * b, 0, 4, nc);
+    if (layout.free_index(v) >= 0) {
+      x.row(v) = Z.row(layout.free_index(v));
+    } else if (layout.vertex_bone(v) >= 0) {
+      const int b = layout.vertex_bone(v);
+      x.row(v) = phi_of(model, layout, static_cast<int>(v), b).transpose() * Z.block(ns + 4 * b, 0, 4, nc);
     }
   }
 }
 
 void AcapOperator::expand(const Eigen::MatrixXd& Z, Eigen::MatrixXd& x) const {
-  expand_impl(model_, disc_, ns_, Z, x);
+  expand_impl(model_, layout_, ns_, Z, x);
 }
 void AcapOperator::expand(const Eigen::MatrixX3d& Z, Eigen::MatrixX3d& x) const {
-  expand_impl(model_, disc_, ns_, Z, x);
+  expand_impl(model_, layout_, ns_, Z, x);
 }
 
 void AcapOperator::apply_CT(const Eigen::MatrixX3d& u, Mat9X& out) const {
   Eigen::MatrixX3d x = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
   expand(u, x);
-  deformation_gradients(disc_, model_.tets, x, out);
+  deformation_gradients(layout_, model_.tets, x, out);
   const Eigen::Index m = model_.tets.rows();
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) out.col(t) *= wv_(t);
@@ -260,11 +260,11 @@ void AcapOperator::apply_CT(const Eigen::MatrixX3d& u, Mat9X& out) const {
 void AcapOperator::reduce_vertex(const Eigen::MatrixX3d& f, Eigen::MatrixX3d& R) const {
   R = Eigen::MatrixX3d::Zero(dofs(), 3);
   for (Eigen::Index v = 0; v < f.rows(); ++v) {
-    if (disc_.free_index(v) >= 0) {
-      R.row(disc_.free_index(v)) = f.row(v);
-    } else if (disc_.vertex_bone(v) >= 0) {
-      const int b = disc_.vertex_bone(v);
-      R.block<4, 3>(ns_ + 4 * b, 0).noalias() += phi_of(model_, disc_, static_cast<int>(v), b) * f.row(v);
+    if (layout_.free_index(v) >= 0) {
+      R.row(layout_.free_index(v)) = f.row(v);
+    } else if (layout_.vertex_bone(v) >= 0) {
+      const int b = layout_.vertex_bone(v);
+      R.block<4, 3>(ns_ + 4 * b, 0).noalias() += phi_of(model_, layout_, static_cast<int>(v), b) * f.row(v);
     }
   }
 }

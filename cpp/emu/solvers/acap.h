@@ -27,28 +27,28 @@
 
 #include "emu/linalg/cholmod_factor.h"
 #include "emu/mesh/block_pattern.h"
-#include "emu/model/model.h"
+#include "emu/model/unknown_layout.h"
 
 namespace emu {
 
 using Mat9X = Eigen::Matrix<double, 9, Eigen::Dynamic>;
 
 /// F_t(x) for every tet, as columns vec(F_t) of a 9 x #T matrix. x: #V by 3.
-void deformation_gradients(const Discretization& disc, const Eigen::MatrixX4i& T,
+void deformation_gradients(const UnknownLayout& layout, const Eigen::MatrixX4i& T,
                            const Eigen::MatrixX3d& x, Mat9X& out);
 
-/// Per-tet copies of the EMU unknowns: out.col(t) = U.col(owner(t)). U: 9 x #unknowns.
-void expand_unknowns(const Discretization& disc, const Mat9X& U, Mat9X& out);
+/// Per-tet copies of the EMU unknowns: out.col(t) = U.col(tet_unknown(t)). U: 9 x #unknowns.
+void expand_unknowns(const UnknownLayout& layout, const Mat9X& U, Mat9X& out);
 /// The per-tet view of unknowns U: U itself when every unknown is one tet (no
 /// bones: no copy), else U expanded into buf.
-const Mat9X& per_tet_view(const Discretization& disc, const Mat9X& U, Mat9X& buf);
+const Mat9X& per_tet_view(const UnknownLayout& layout, const Mat9X& U, Mat9X& buf);
 /// Sums of per-tet columns into their unknowns (fixed order). per_tet: 9 x #T;
 /// without bones it is moved into out (no copy) and left empty.
-void reduce_to_unknowns(const Discretization& disc, Mat9X& per_tet, Mat9X& out);
+void reduce_to_unknowns(const UnknownLayout& layout, Mat9X& per_tet, Mat9X& out);
 
 class AcapOperator {
  public:
-  AcapOperator(const Model& model, const Discretization& disc);
+  AcapOperator(const Model& model, const UnknownLayout& layout);
 
   /// Number of scalar position unknowns per coordinate: num_free + 4 #bones.
   int dofs() const { return ns_ + nq_; }
@@ -92,7 +92,7 @@ class AcapOperator {
   void setup_bones();
 
   const Model& model_;
-  const Discretization& disc_;
+  const UnknownLayout& layout_;
   BlockPattern pattern_;
   CholmodFactor factor_;
   Eigen::VectorXd wv_;

@@ -1,28 +1,20 @@
 #include "emu/solvers/emu_solver.h"
 
-#include <chrono>
 #include <cmath>
 #include <stdexcept>
 
-#include <Eigen/Eigenvalues>
-#include <Eigen/SVD>
-#include <limits>
-
+#include "emu/energy/acap_coupling.h"
+#include "emu/energy/gravity_work.h"
+#include "emu/energy/joint_spring.h"
 #include "emu/energy/material.h"
+#include "emu/linalg/rotation.h"
+#include "emu/solvers/bone_coarse_space.h"
+#include "emu/solvers/newton/newton_driver.h"
+#include "emu/solvers/newton/pcg.h"
 
 namespace emu {
 namespace {
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
-
-// Nearest rotation (polar decomposition) of a 3x3 matrix near a rotation.
-Mat3 nearest_rotation(const Mat3& M) {
-  Eigen::JacobiSVD<Mat3> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Mat3 U = svd.matrixU();
-  if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) *= -1.0;
-  return U * svd.matrixV().transpose();
-}
 }  // namespace
 
 struct EmuSolver::Context {
@@ -36,14 +28,14 @@ struct EmuSolver::Context {
 };
 
 EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options)
-    : model_((model.validate(), model)), disc_(model_), options_(options), emu_(emu_options) {
+    : model_((model.validate(), model)), layout_(model_), options_(options), emu_(emu_options) {
   if (!(emu_.alpha > 0) || !std::isfinite(emu_.alpha)) throw std::invalid_argument("alpha must be positive and finite");
   if (emu_.modes < 0) throw std::invalid_argument("the number of modes must be >= 0");
-  if (disc_.num_bones && emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur)
+  if (layout_.num_bones && emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur)
     throw std::invalid_argument("the Schur-complement preconditioner does not handle movable bones; "
                                 "use preconditioner='woodbury'");
   auto t0 = Clock::now();
-  acap_ = std::make_unique<AcapOperator>(model_, disc_);
+  acap_ = std::make_unique<AcapOperator>(model_, layout_);
   factor_seconds_ = seconds_since(t0);
   t0 = Clock::now();
   // Modes only where the Woodbury approximation is used (section 7: leave out
@@ -60,12 +52,12 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
                                       Eigen::Map<Eigen::VectorXd>(out, acap_->dofs()) = Z.col(0);
                                     },
                                     ks, acap_->constraint_rank())
-          : lowest_modes(acap_->factor(), std::min(ks, disc_.num_free));
+          : lowest_modes(acap_->factor(), std::min(ks, layout_.num_free));
   modes_seconds_ = seconds_since(t0);
-  woodbury_ = std::make_unique<Woodbury>(model_, disc_, *acap_, modes, emu_.alpha);
+  woodbury_ = std::make_unique<Woodbury>(model_, layout_, *acap_, modes, emu_.alpha);
   if (schur) {
     t0 = Clock::now();
-    schur_ = std::make_unique<SchurPreconditioner>(model_, disc_, *acap_, emu_.alpha);
+    schur_ = std::make_unique<SchurPreconditioner>(model_, layout_, *acap_, emu_.alpha);
     factor_seconds_ += seconds_since(t0);
   }
   tet_energy_.resize(model_.tets.rows());
@@ -78,11 +70,11 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   c.x_pinned = pinned_positions(model_, load);
   Eigen::MatrixX3d f = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
   for (Eigen::Index v = 0; v < c.x_pinned.rows(); ++v)
-    if (disc_.free_index(v) >= 0 || disc_.vertex_bone(v) >= 0) {
+    if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0) {
       c.x_pinned.row(v).setZero();
-      f.row(v) = disc_.lumped_mass(v) * load.gravity.transpose();
+      f.row(v) = gravity_work::vertex_gradient(layout_.lumped_mass(v), load.gravity).transpose();
     }
-  deformation_gradients(disc_, model_.tets, c.x_pinned, c.F_pinned);
+  deformation_gradients(layout_, model_.tets, c.x_pinned, c.F_pinned);
   c.h = acap_->joint_targets(pinned_positions(model_, load), load.joint_targets);
   c.gravity = load.gravity;
   c.has_gravity = load.gravity.squaredNorm() > 0;
@@ -94,7 +86,7 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
     acap_->solve(Eigen::MatrixXd(R), Z);
     Eigen::MatrixX3d yfull = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
     acap_->expand(Eigen::MatrixX3d(Z), yfull);
-    deformation_gradients(disc_, model_.tets, yfull, c.F_gravity);
+    deformation_gradients(layout_, model_.tets, yfull, c.F_gravity);
   }
   return c;
 }
@@ -102,53 +94,49 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
 void EmuSolver::fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const {
   Mat9X buf;
   x = c.x_pinned;
-  acap_->fit(per_tet_view(disc_, F, buf), &c.F_pinned, &c.h, x);
-  deformation_gradients(disc_, model_.tets, x, Fx);
+  acap_->fit(per_tet_view(layout_, F, buf), &c.F_pinned, &c.h, x);
+  deformation_gradients(layout_, model_.tets, x, Fx);
 }
 
 void EmuSolver::fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const {
   Mat9X buf;
   dx.setZero(model_.rest.rows(), 3);
-  acap_->fit(per_tet_view(disc_, D, buf), nullptr, nullptr, dx);
-  deformation_gradients(disc_, model_.tets, dx, Fd);
+  acap_->fit(per_tet_view(layout_, D, buf), nullptr, nullptr, dx);
+  deformation_gradients(layout_, model_.tets, dx, Fd);
 }
 
 void EmuSolver::project_tangent(const Mat9X& F, Mat9X& v) const {
-  for (int u = disc_.num_soft; u < disc_.num_unknowns; ++u) {
-    const Mat3 R = unflatten(F.col(u));
-    const Mat3 K = R.transpose() * unflatten(v.col(u));
-    v.col(u) = flatten(Mat3(R * (0.5 * (K - K.transpose()))));
-  }
+  for (int u = layout_.num_soft; u < layout_.num_unknowns; ++u)
+    v.col(u) = flatten(project_to_tangent(unflatten(F.col(u)), unflatten(v.col(u))));
 }
 
 void EmuSolver::retract(const Mat9X& F, const Mat9X& d, double s, Mat9X& out) const {
   out = F + s * d;
-  for (int u = disc_.num_soft; u < disc_.num_unknowns; ++u) out.col(u) = flatten(nearest_rotation(unflatten(out.col(u))));
+  for (int u = layout_.num_soft; u < layout_.num_unknowns; ++u) out.col(u) = flatten(nearest_rotation(unflatten(out.col(u))));
 }
 
 void EmuSolver::riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                                    bool curvature, Mat9X& out) const {
   hessian_product_into(A, v, out);
-  for (int u = disc_.num_soft; u < disc_.num_unknowns; ++u) {
+  for (int u = layout_.num_soft; u < layout_.num_unknowns; ++u) {
     const Mat3 R = unflatten(F.col(u));
     Mat3 M = unflatten(out.col(u));
     if (curvature) {
       const Mat3 RtG = R.transpose() * unflatten(g.col(u));
       M -= unflatten(v.col(u)) * (0.5 * (RtG + RtG.transpose()));
     }
-    const Mat3 K = R.transpose() * M;
-    out.col(u) = flatten(Mat3(R * (0.5 * (K - K.transpose()))));
+    out.col(u) = flatten(project_to_tangent(R, M));
   }
 }
 
 double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
                                const Mat9X* Fd, double s) const {
   const Eigen::Index m = model_.tets.rows();
-  const auto& V = disc_.geometry.volume;
+  const auto& V = layout_.geometry.volume;
   const auto& wv = acap_->weight_volume();
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
-    const int u = disc_.owner(t);
+    const int u = layout_.tet_unknown(t);
     Vec9 f = F.col(u), fx = Fx.col(t);
     if (D) {
       f += s * D->col(u);
@@ -156,75 +144,75 @@ double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx
     }
     // Bones are rigid: no elastic energy on rotations.
     double e = 0.0;
-    if (!disc_.is_bone_tet(t)) {
-      const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
+    if (!layout_.is_bone_tet(t)) {
+      const TetMaterial mat = tet_material(model_, c.act, t);
       e = V(t) * material_energy(mat, unflatten(f));
     }
-    tet_energy_[t] = e + 0.5 * emu_.alpha * wv(t) * (fx - f).squaredNorm();
+    tet_energy_[t] = e + acap_coupling::energy(f, fx, emu_.alpha, wv(t));
   }
   double E = 0;
   for (Eigen::Index t = 0; t < m; ++t) E += tet_energy_[t];
-  // Passive joint springs: k/2 (3 - tr F_b).
   for (int b = 0; b < model_.bone_stiffness.size(); ++b) {
-    const int u = disc_.num_soft + b;
+    const int u = layout_.num_soft + b;
     const Mat3 Fb = unflatten(D ? Vec9(F.col(u) + s * D->col(u)) : Vec9(F.col(u)));
-    E += 0.5 * model_.bone_stiffness(b) * (3.0 - Fb.trace());
+    E += joint_spring::energy(Fb, model_.bone_stiffness(b));
   }
   return E;
 }
 
 void EmuSolver::gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx, Mat9X& g) const {
   const Eigen::Index m = model_.tets.rows();
-  const auto& V = disc_.geometry.volume;
+  const auto& V = layout_.geometry.volume;
   const auto& wv = acap_->weight_volume();
   Mat9X per_tet(9, m);
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
-    const auto Fu = F.col(disc_.owner(t));
-    Vec9 gt = emu_.alpha * wv(t) * (Fu - Fx.col(t));
-    if (!disc_.is_bone_tet(t)) {
-      const TetMaterial mat{model_.mu(t), model_.lambda(t), c.act(t), model_.fiber.row(t).transpose()};
+    const auto Fu = F.col(layout_.tet_unknown(t));
+    Vec9 gt = acap_coupling::gradient(Fu, Fx.col(t), emu_.alpha, wv(t));
+    if (!layout_.is_bone_tet(t)) {
+      const TetMaterial mat = tet_material(model_, c.act, t);
       gt += V(t) * flatten(material_stress(mat, unflatten(Fu)));
     }
     if (c.has_gravity) gt -= wv(t) * c.F_gravity.col(t);
     per_tet.col(t) = gt;
   }
-  reduce_to_unknowns(disc_, per_tet, g);
+  reduce_to_unknowns(layout_, per_tet, g);
   for (int b = 0; b < model_.bone_stiffness.size(); ++b)
-    g.col(disc_.num_soft + b) -= 0.5 * model_.bone_stiffness(b) * flatten(Mat3::Identity());
+    g.col(layout_.num_soft + b) += flatten(joint_spring::gradient(model_.bone_stiffness(b)));
 }
 
 void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>* A,
                             std::vector<Mat9>* A_exact) const {
-  // A_t = V_t d2Psi/dF2 + alpha w_t V_t I: PSD-filtered (A) and/or unfiltered
-  // (A_exact); a bone's block is alpha sum_t w_t V_t I (rigid: no material).
+  // A_u = V_t d2Psi/dF2 + d2E_C/dF2 (alpha w_t V_t I): PSD-filtered (A) and/or
+  // unfiltered (A_exact); a bone's block is the coupling of all its tets
+  // (rigid: no material).
   const EigenFilter filter = options_.eigen_filter == 1 ? EigenFilter::Abs : EigenFilter::Clamp;
-  const int nu = disc_.num_unknowns, ns = disc_.num_soft;
-  const auto& V = disc_.geometry.volume;
+  const int nu = layout_.num_unknowns, ns = layout_.num_soft;
+  const auto& V = layout_.geometry.volume;
   const auto& wv = acap_->weight_volume();
   if (A) A->resize(nu);
   if (A_exact) A_exact->resize(nu);
   for (int u = ns; u < nu; ++u) {
     double w = 0;
-    for (int i = disc_.unknown_ptr[u]; i < disc_.unknown_ptr[u + 1]; ++i) w += wv(disc_.unknown_tets[i]);
-    const Mat9 Ab = emu_.alpha * w * Mat9::Identity();
+    for (int i = layout_.unknown_ptr[u]; i < layout_.unknown_ptr[u + 1]; ++i) w += wv(layout_.unknown_tets[i]);
+    const Mat9 Ab = acap_coupling::hessian_diagonal(emu_.alpha, w) * Mat9::Identity();
     if (A) (*A)[u] = Ab;
     if (A_exact) (*A_exact)[u] = Ab;
   }
 #pragma omp parallel for schedule(static)
   for (int u = 0; u < ns; ++u) {
-    const int t = disc_.unknown_tets[u];
-    const Mat3 Ft = unflatten(F.col(u));
-    const Mat9 H = snh::hessian(Ft, model_.mu(t), model_.lambda(t));
-    Mat9 fib = Mat9::Zero();
-    if (c.act(t) != 0.0) fib = fiber::hessian(model_.fiber.row(t).transpose(), c.act(t));
+    const int t = layout_.unknown_tets[u];
+    Mat9 H_psd, H;
+    material_hessians(tet_material(model_, c.act, t), unflatten(F.col(u)), filter, A ? &H_psd : nullptr,
+                      A_exact ? &H : nullptr);
+    const double coupling = acap_coupling::hessian_diagonal(emu_.alpha, wv(t));
     if (A) {
-      (*A)[u] = V(t) * (psd_project<9>(H, filter) + fib);
-      (*A)[u].diagonal().array() += emu_.alpha * wv(t);
+      (*A)[u] = V(t) * H_psd;
+      (*A)[u].diagonal().array() += coupling;
     }
     if (A_exact) {
-      (*A_exact)[u] = V(t) * (H + fib);
-      (*A_exact)[u].diagonal().array() += emu_.alpha * wv(t);
+      (*A_exact)[u] = V(t) * H;
+      (*A_exact)[u].diagonal().array() += coupling;
     }
   }
 }
@@ -237,7 +225,7 @@ void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v,
   fit_linear_into(v, dx, Fd);
   const auto& wv = acap_->weight_volume();
   const Eigen::Index m = model_.tets.rows();
-  if (disc_.num_bones == 0) {  // one unknown per tet: one fused pass
+  if (layout_.num_bones == 0) {  // one unknown per tet: one fused pass
     out.resize(9, m);
 #pragma omp parallel for schedule(static)
     for (Eigen::Index t = 0; t < m; ++t) out.col(t) = A[t] * v.col(t) - (emu_.alpha * wv(t)) * Fd.col(t);
@@ -245,16 +233,16 @@ void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v,
   }
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) Fd.col(t) *= emu_.alpha * wv(t);
-  reduce_to_unknowns(disc_, Fd, out);
-  const long nu = disc_.num_unknowns;
+  reduce_to_unknowns(layout_, Fd, out);
+  const long nu = layout_.num_unknowns;
 #pragma omp parallel for schedule(static)
   for (long u = 0; u < nu; ++u) out.col(u) = A[u] * v.col(u) - out.col(u);
 }
 
 Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
-  if (rows.rows() != disc_.num_unknowns || rows.cols() != 9)
+  if (rows.rows() != layout_.num_unknowns || rows.cols() != 9)
     throw std::invalid_argument("expected a #unknowns by 9 array (one vec(F) per soft tet, then per bone; " +
-                                std::to_string(disc_.num_unknowns) + " rows), got " +
+                                std::to_string(layout_.num_unknowns) + " rows), got " +
                                 std::to_string(rows.rows()) + " by " + std::to_string(rows.cols()));
   if (!rows.allFinite()) throw std::invalid_argument("deformation gradients contain NaN or infinite values");
   return rows.transpose();
@@ -267,7 +255,7 @@ double EmuSolver::energy(const LoadCase& load, const Eigen::MatrixXd& Frows) con
   Mat9X Fx;
   fit_into(c, F, x, Fx);
   double E = energy_along(c, F, Fx, nullptr, nullptr, 0.0);
-  if (c.has_gravity) E -= (disc_.lumped_mass.transpose() * x).dot(c.gravity.transpose());
+  E -= load_work(c, x);
   return E;
 }
 
@@ -321,301 +309,227 @@ Eigen::MatrixXd EmuSolver::block_hessians(const LoadCase& load, const Eigen::Mat
   return out;
 }
 
+double EmuSolver::load_work(const Context& c, const Eigen::MatrixX3d& x) const {
+  return c.has_gravity ? gravity_work::energy(layout_.lumped_mass, x, c.gravity) : 0.0;
+}
+
+double EmuSolver::gradient_floor(const Context& c) const {
+  // 1e-13 of the summed moduli V (alpha w + mu + lambda + a): round-off in P(F)
+  // scales with lambda, in the coupling with alpha w.
+  double scale = 0;
+  for (Eigen::Index t = 0; t < model_.tets.rows(); ++t)
+    scale += layout_.geometry.volume(t) *
+             (emu_.alpha * model_.acap_weight(t) +
+              (layout_.is_bone_tet(t) ? 0.0 : model_.mu(t) + model_.lambda(t) + c.act(t)));
+  return 1e-13 * scale;
+}
+
+Mat9X EmuSolver::start_unknowns(const Eigen::MatrixXd* F0) const {
+  const Eigen::Index m = model_.tets.rows();
+  const int nu = layout_.num_unknowns;
+  Mat9X F(9, nu);
+  if (!F0) {
+    for (int u = 0; u < nu; ++u) F.col(u) = flatten(Mat3::Identity());
+    return F;
+  }
+  if (F0->rows() != m || F0->cols() != 9)
+    throw std::invalid_argument("the start F must be #T by 9 (one vec(F) per tet), got " +
+                                std::to_string(F0->rows()) + " by " + std::to_string(F0->cols()));
+  if (!F0->allFinite()) throw std::invalid_argument("the start F contains NaN or infinite values");
+  for (int u = 0; u < nu; ++u) F.col(u) = F0->row(layout_.unknown_tets[layout_.unknown_ptr[u]]).transpose();
+  for (int u = layout_.num_soft; u < nu; ++u) F.col(u) = flatten(nearest_rotation(unflatten(F.col(u))));
+  return F;
+}
+
+void EmuSolver::base_precondition(const Mat9X& F, const Mat9X& in, Mat9X& out) const {
+  if (schur_) schur_->apply(in, out);
+  else woodbury_->apply(in, out);
+  if (layout_.num_bones) project_tangent(F, out);
+}
+
+// One EMU solve as the Newton driver sees it. The iterate is F (9 x
+// #unknowns) with its fit x = x*(F), Fx = F_t(x), the Euclidean gradient g and
+// the Riemannian one gR (bone columns projected to the tangent space).
+class EmuSolver::Newton {
+ public:
+  Newton(EmuSolver& s, const Context& c, Mat9X F)
+      : s_(s), c_(c), bones_(s.layout_.num_bones > 0), F_(std::move(F)), coarse_(s.layout_, s.emu_.alpha) {
+    s_.fit_into(c_, F_, x_, Fx_);
+    E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_);
+    update_gradient();
+  }
+
+  double energy() const { return E_; }
+  double grad_norm() const { return gn_; }
+  const Mat9X& unknowns() const { return F_; }
+  const std::vector<NeutralMode>& neutral_modes() const { return coarse_.neutral_modes(); }
+
+  SearchDirection direction(int it) {
+    SearchDirection dir;
+    const EmuOptions& o = s_.emu_;
+    const bool exact = exact_allowed_ && exact_ok_;
+    if (exact_allowed_ && !exact) ++dir.filtered;
+    // The Woodbury (or Schur) preconditioner lags behind exact Hessian
+    // products: it is rebuilt (eigen-filtered blocks, SYRK) every
+    // preconditioner_refresh steps, or sooner when CG slows down by half since
+    // the last rebuild.
+    const bool refresh = !exact || it == 1 || since_refresh_ >= o.preconditioner_refresh ||
+                         (cg_after_refresh_ >= 0 && last_cg_ > 1.5 * cg_after_refresh_ + 5);
+    if (refresh) {
+      s_.blocks_into(c_, F_, &A_, exact ? &A_exact_ : nullptr);
+      if (s_.schur_) {
+        if (!s_.schur_->update(A_)) return failed(dir, "Schur-complement preconditioner could not be factorised");
+      } else {
+        s_.woodbury_->update(A_);
+      }
+      since_refresh_ = 0;
+      cg_after_refresh_ = -1;
+    } else {
+      s_.blocks_into(c_, F_, nullptr, &A_exact_);
+    }
+    const std::vector<Mat9>& H = exact ? A_exact_ : A_;
+    auto product = [&](const Mat9X& v, Mat9X& out) {
+      if (bones_) s_.riemannian_product(H, F_, g_, v, exact, out);
+      else s_.hessian_product_into(H, v, out);
+    };
+    // The bone coarse space follows the Hessian CG uses (rebuilt every step).
+    if (bones_ && o.bone_coarse_space)
+      coarse_.build(
+          F_,
+          [&](Mat9X& Z) {
+            s_.fit_linear_into(Z, dx_, Fd_);
+            for (int u = 0; u < s_.layout_.num_soft; ++u) Z.col(u) = Fd_.col(s_.layout_.unknown_tets[u]);
+          },
+          product);
+    ++since_refresh_;
+    if (o.step == EmuStep::Woodbury) {
+      precondition(gR_, d_);
+      d_ = -d_;
+    } else {
+      // Inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker).
+      const double eta = std::min(o.cg_forcing_max, std::pow(gn_ / g0_, o.cg_forcing_exponent));
+      const PcgResult cg = pcg_.solve(product, [&](const Mat9X& r, Mat9X& z) { precondition(r, z); },
+                                      Mat9X(-gR_), eta * gn_, o.cg_max_iterations, d_);
+      dir.cg_iterations = cg.iterations;
+      if (cg.negative_curvature) ++dir.filtered;  // exact H is indefinite here: keep what CG had
+    }
+    dir.slope = dot(gR_, d_);
+    if (!(dir.slope < 0)) {
+      precondition(gR_, d_);
+      d_ = -d_;
+      dir.slope = dot(gR_, d_);
+      if (!(dir.slope < 0)) return failed(dir, "no descent direction (Hessian approximation broke down)");
+    }
+    // Without bones x*(F + s d) = x + s dx: one fit per direction. A bone's
+    // path R + s d is retracted to rotations, so each trial refits.
+    if (!bones_) {
+      s_.fit_linear_into(d_, dx_, Fd_);
+      Wx_ = s_.load_work(c_, x_);
+      Wdx_ = s_.load_work(c_, dx_);
+    }
+    exact_step_ = exact;
+    dir_cg_ = dir.cg_iterations;
+    return dir;
+  }
+
+  double trial_energy(double s) {
+    if (!bones_) return s_.energy_along(c_, F_, Fx_, &d_, &Fd_, s) - Wx_ - s * Wdx_;
+    s_.retract(F_, d_, s, Ftrial_);
+    s_.fit_into(c_, Ftrial_, xtrial_, Fxtrial_);
+    return s_.energy_along(c_, Ftrial_, Fxtrial_, nullptr, nullptr, 0.0) - s_.load_work(c_, xtrial_);
+  }
+
+  double trial_grad_norm(double s) {
+    Mat9X g1;
+    if (bones_) {
+      s_.retract(F_, d_, s, Ftrial_);
+      s_.fit_into(c_, Ftrial_, xtrial_, Fxtrial_);
+      s_.gradient_into(c_, Ftrial_, Fxtrial_, g1);
+      s_.project_tangent(Ftrial_, g1);
+    } else {
+      const Mat9X F1 = F_ + s * d_, Fx1 = Fx_ + s * Fd_;
+      s_.gradient_into(c_, F1, Fx1, g1);
+    }
+    return g1.norm();
+  }
+
+  double take_step(int it, double s, double E_trial) {
+    if (bones_) {
+      s_.retract(F_, d_, s, Ftrial_);
+      F_ = Ftrial_;
+      s_.fit_into(c_, F_, x_, Fx_);
+      E_ = E_trial;
+    } else if (it % 50 == 0) {  // x*(F) is linear in F; refit now and then against drift
+      F_ += s * d_;
+      s_.fit_into(c_, F_, x_, Fx_);
+      E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_);
+    } else {
+      F_ += s * d_;
+      x_ += s * dx_;
+      Fx_ += s * Fd_;
+      E_ = E_trial;
+    }
+    update_gradient();
+    last_cg_ = dir_cg_;
+    if (cg_after_refresh_ < 0) cg_after_refresh_ = dir_cg_;
+    // CG on an indefinite exact Hessian need not meet negative curvature: its
+    // step can be long and mostly cut by the line search. After such a step
+    // (s < 1/2) the filtered Hessian is used until a full step is taken again,
+    // as FEM does after a failed Cholesky.
+    if (exact_allowed_) exact_ok_ = exact_step_ ? s >= 0.5 : s == 1.0;
+    return E_;
+  }
+
+  /// The solve's output: positions of the final fit and F per tet.
+  void finish(SolveResult& res) {
+    res.set_neutral_modes(neutral_modes());
+    s_.fit_into(c_, F_, x_, Fx_);
+    res.positions = x_;
+    Mat9X Ft;
+    expand_unknowns(s_.layout_, F_, Ft);
+    res.F = Ft.transpose();
+  }
+
+ private:
+  void update_gradient() {
+    s_.gradient_into(c_, F_, Fx_, g_);
+    gR_ = g_;
+    if (bones_) s_.project_tangent(F_, gR_);
+    gn_ = gR_.norm();
+    if (g0_ < 0) g0_ = gn_;
+  }
+  void precondition(const Mat9X& in, Mat9X& out) const {
+    auto base = [&](const Mat9X& r, Mat9X& z) { s_.base_precondition(F_, r, z); };
+    if (bones_) coarse_.apply(in, out, base);
+    else base(in, out);
+  }
+  static SearchDirection failed(const SearchDirection& dir, const char* why) {
+    SearchDirection f = SearchDirection::failed(why);
+    f.filtered = dir.filtered;
+    return f;
+  }
+
+  EmuSolver& s_;
+  const Context& c_;
+  const bool bones_;
+  const bool exact_allowed_ = s_.options_.exact_when_definite && s_.emu_.step == EmuStep::NewtonKrylov;
+  Mat9X F_, Fx_, g_, gR_, d_, Fd_, Ftrial_, Fxtrial_;
+  Eigen::MatrixX3d x_, dx_, xtrial_;
+  double E_ = 0, gn_ = 0, g0_ = -1, Wx_ = 0, Wdx_ = 0;
+  std::vector<Mat9> A_, A_exact_;
+  bool exact_ok_ = true, exact_step_ = false;
+  int since_refresh_ = 0, cg_after_refresh_ = -1, last_cg_ = 0, dir_cg_ = 0;
+  BoneCoarseSpace coarse_;
+  Pcg<Mat9X> pcg_;
+};
+
 SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   const auto t0 = Clock::now();
   const Context c = make_context(load);
-  const Eigen::Index m = model_.tets.rows();
-  const int nu = disc_.num_unknowns;
-  Mat9X F(9, nu);
-  if (F0) {
-    if (F0->rows() != m || F0->cols() != 9)
-      throw std::invalid_argument("the start F must be #T by 9 (one vec(F) per tet), got " +
-                                  std::to_string(F0->rows()) + " by " + std::to_string(F0->cols()));
-    if (!F0->allFinite()) throw std::invalid_argument("the start F contains NaN or infinite values");
-    for (int u = 0; u < nu; ++u) F.col(u) = F0->row(disc_.unknown_tets[disc_.unknown_ptr[u]]).transpose();
-    for (int u = disc_.num_soft; u < nu; ++u) F.col(u) = flatten(nearest_rotation(unflatten(F.col(u))));
-  } else {
-    for (int u = 0; u < nu; ++u) F.col(u) = flatten(Mat3::Identity());
-  }
-  const bool bones = disc_.num_bones > 0;
-  const auto& M = disc_.lumped_mass;
-  auto work = [&](const Eigen::MatrixX3d& x) {
-    return c.has_gravity ? (M.transpose() * x).dot(c.gravity.transpose()) : 0.0;
-  };
-  Eigen::MatrixX3d x, dx;
-  Mat9X Fx, Fd, g, gR, d, r, z, p, Hp, Ftrial, Fxtrial;
-  Eigen::MatrixX3d xtrial;
-  fit_into(c, F, x, Fx);
-  double E = energy_along(c, F, Fx, nullptr, nullptr, 0.0) - work(x);
-  // g: Euclidean gradient; gR: bone columns projected to the tangent space.
-  auto update_gradient = [&] {
-    gradient_into(c, F, Fx, g);
-    gR = g;
-    if (bones) project_tangent(F, gR);
-  };
-  update_gradient();
-  double gn = gR.norm();
-  double scale = 0;
-  for (Eigen::Index t = 0; t < m; ++t)
-    scale += disc_.geometry.volume(t) * (emu_.alpha * model_.acap_weight(t) +
-                                         (disc_.is_bone_tet(t) ? 0.0 : model_.mu(t) + model_.lambda(t) + c.act(t)));
-  Convergence conv{options_.rtol_grad, options_.rtol_energy, E, gn, 1e-13 * scale};
+  Newton newton(*this, c, start_unknowns(F0));
   SolveResult res;
-  res.grad_norm0 = gn;
-  res.history.push_back({0, E, gn, 0.0, seconds_since(t0), 0, 0});
-  res.status = "max iterations reached";
-  if (conv.initial()) {
-    res.converged = true;
-    res.status = "converged: initial state is in equilibrium";
-  }
-  std::vector<Mat9> A, A_exact;
-  const bool exact_allowed = options_.exact_when_definite && emu_.step == EmuStep::NewtonKrylov;
-  // CG on an indefinite exact Hessian need not meet negative curvature: its
-  // step can be long and mostly cut by the line search. After such a step
-  // (step < 1/2) the filtered Hessian is used until a full step is taken again,
-  // as FEM does after a failed Cholesky.
-  bool exact_ok = true;
-  // With exact Hessian products the Woodbury preconditioner may lag: it is
-  // rebuilt (eigen-filtered blocks, SYRK) every preconditioner_refresh
-  // iterations, or sooner when CG slows down by half since the last rebuild.
-  int since_refresh = 0, cg_after_refresh = -1, last_cg = 0;
-  // Bones: the Woodbury term sees a bone's block as stiff as its ACAP weight
-  // (alpha sum w V), while turning a bone with the soft tissue following is
-  // cheap; CG then spends many iterations on the bones' rotations. A coarse
-  // correction over Z = {turn bone b about axis k, soft F_t following the
-  // fitted positions} (3 per bone) adds Z (Z^T H Z)^-1 Z^T (additive
-  // two-level preconditioner; rebuilt with the Woodbury term).
-  std::vector<Mat9X> coarse_Z, coarse_HZ;
-  Eigen::MatrixXd coarse_inv;  // pseudo-inverse of Z^T H Z
-  bool coarse_ok = false, balancing = false;
-  std::vector<std::pair<int, Vec3>> neutral;  // bone turns of zero curvature (neutral modes)
-  auto build_coarse = [&](const std::vector<Mat9>& Ablocks, bool curvature) {
-    const int nz = 3 * disc_.num_bones;
-    coarse_Z.assign(nz, Mat9X::Zero(9, nu));
-    coarse_HZ.resize(nz);
-    Eigen::MatrixX3d dxk;
-    Mat9X Fdk, HZ;
-    for (int b = 0; b < disc_.num_bones; ++b)
-      for (int k = 0; k < 3; ++k) {
-        Mat9X& Z = coarse_Z[3 * b + k];
-        const int ub = disc_.num_soft + b;
-        Mat3 W = Mat3::Zero();
-        W((k + 2) % 3, (k + 1) % 3) = 1.0;
-        W((k + 1) % 3, (k + 2) % 3) = -1.0;
-        Z.col(ub) = flatten(Mat3(W * unflatten(F.col(ub))));
-        fit_linear_into(Z, dxk, Fdk);
-        for (int u = 0; u < disc_.num_soft; ++u) Z.col(u) = Fdk.col(disc_.unknown_tets[u]);
-      }
-    Eigen::MatrixXd E(nz, nz);
-    for (int j = 0; j < nz; ++j) {
-      riemannian_product(Ablocks, F, g, coarse_Z[j], curvature, coarse_HZ[j]);
-      for (int i = 0; i < nz; ++i) E(i, j) = dot(coarse_Z[i], coarse_HZ[j]);
-    }
-    // A turn of zero curvature (nothing resists it: a neutral mode) is left
-    // out of the correction and reported. Scale: the curvature of turning the
-    // bone's volume against an ACAP term of weight 1, 2 alpha sum_t V_t (not the
-    // bone's own, much larger, weight: a soft but real resistance, such as a
-    // muscle's torsion, must not count as none).
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (E + E.transpose()));
-    double scale = std::numeric_limits<double>::infinity();
-    for (int u = disc_.num_soft; u < nu; ++u) {
-      double vol = 0;
-      for (int i = disc_.unknown_ptr[u]; i < disc_.unknown_ptr[u + 1]; ++i)
-        vol += disc_.geometry.volume(disc_.unknown_tets[i]);
-      scale = std::min(scale, 2.0 * emu_.alpha * vol);
-    }
-    coarse_inv.setZero(nz, nz);
-    neutral.clear();
-    balancing = true;
-    for (int i = 0; i < nz; ++i) {
-      const Eigen::VectorXd v = es.eigenvectors().col(i);
-      if (es.eigenvalues()(i) > 1e-9 * scale) {
-        coarse_inv += v * v.transpose() / es.eigenvalues()(i);
-        continue;
-      }
-      balancing = false;
-      if (es.eigenvalues()(i) < -1e-9 * scale) continue;  // negative curvature: not a neutral mode
-      int best = 0;
-      for (int b = 1; b < disc_.num_bones; ++b)
-        if (v.segment<3>(3 * b).norm() > v.segment<3>(3 * best).norm()) best = b;
-      neutral.push_back({best, v.segment<3>(3 * best).normalized()});
-    }
-    coarse_ok = true;
-  };
-  Mat9X r1;
-  auto precondition = [&](const Mat9X& in, Mat9X& out) {
-    const size_t nz = coarse_Z.size();
-    if (bones && coarse_ok && balancing) {
-      // Balancing: M^-1 r = Q r + (I - Q H) B (I - H Q) r, Q = Z E^-1 Z^T.
-      Eigen::VectorXd zr(nz);
-      for (size_t i = 0; i < nz; ++i) zr(i) = dot(coarse_Z[i], in);
-      const Eigen::VectorXd c1 = coarse_inv * zr;
-      r1 = in;
-      for (size_t i = 0; i < nz; ++i) r1 -= c1(i) * coarse_HZ[i];
-      woodbury_->apply(r1, out);
-      project_tangent(F, out);
-      for (size_t i = 0; i < nz; ++i) zr(i) = dot(coarse_HZ[i], out);
-      const Eigen::VectorXd c2 = coarse_inv * zr;
-      for (size_t i = 0; i < nz; ++i) out += (c1(i) - c2(i)) * coarse_Z[i];
-      return;
-    }
-    if (schur_) schur_->apply(in, out);
-    else woodbury_->apply(in, out);
-    if (!bones) return;
-    project_tangent(F, out);
-    if (!coarse_ok) return;
-    Eigen::VectorXd zr(nz);
-    for (size_t i = 0; i < nz; ++i) zr(i) = dot(coarse_Z[i], in);
-    const Eigen::VectorXd c = coarse_inv * zr;
-    for (size_t i = 0; i < nz; ++i) out += c(i) * coarse_Z[i];
-  };
-  for (int it = 1; !res.converged && it <= options_.max_iterations; ++it) {
-    if (options_.interrupted && options_.interrupted()) {
-      res.status = "interrupted";
-      break;
-    }
-    const bool exact = exact_allowed && exact_ok;
-    if (exact_allowed && !exact) ++res.filtered_steps;
-    const bool refresh = !exact || it == 1 || since_refresh >= emu_.preconditioner_refresh ||
-                         (cg_after_refresh >= 0 && last_cg > 1.5 * cg_after_refresh + 5);
-    if (refresh) {
-      blocks_into(c, F, &A, exact ? &A_exact : nullptr);
-      if (schur_) {
-        if (!schur_->update(A)) {
-          res.status = "Schur-complement preconditioner could not be factorised";
-          break;
-        }
-      } else {
-        woodbury_->update(A);
-      }
-      since_refresh = 0;
-      cg_after_refresh = -1;
-    } else {
-      blocks_into(c, F, nullptr, &A_exact);
-    }
-    // The coarse space follows the Hessian CG uses (rebuilt every step: 3 fits
-    // and 3 products per bone).
-    if (bones && emu_.bone_coarse_space) build_coarse(exact ? A_exact : A, exact);
-    ++since_refresh;
-    int cg_its = 0;
-    if (emu_.step == EmuStep::Woodbury) {
-      precondition(gR, d);
-      d = -d;
-    } else {
-      // Inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker).
-      const double eta = std::min(emu_.cg_forcing_max, std::pow(gn / conv.g0, emu_.cg_forcing_exponent));
-      d.setZero(9, nu);
-      r = -gR;
-      precondition(r, z);
-      p = z;
-      double rz = dot(r, z);
-      for (int i = 0; i < emu_.cg_max_iterations; ++i) {
-        if (bones) riemannian_product(exact ? A_exact : A, F, g, p, exact, Hp);
-        else hessian_product_into(exact ? A_exact : A, p, Hp);
-        const double pHp = dot(p, Hp);
-        if (!(pHp > 0)) {  // negative curvature (exact H is indefinite here): keep what we have
-          if (i == 0) d = z;
-          ++res.filtered_steps;
-          break;
-        }
-        const double a = rz / pHp;
-        d += a * p;
-        r -= a * Hp;
-        ++cg_its;
-        if (r.norm() <= eta * gn) break;
-        precondition(r, z);
-        const double rz_new = dot(r, z);
-        p = z + (rz_new / rz) * p;
-        rz = rz_new;
-      }
-    }
-    double slope = dot(gR, d);
-    if (!(slope < 0)) {
-      precondition(gR, d);
-      d = -d;
-      slope = dot(gR, d);
-      if (!(slope < 0)) {
-        res.status = "no descent direction (Hessian approximation broke down)";
-        break;
-      }
-    }
-    // Without bones x*(F + s d) = x + s dx (one fit per direction); a bone's
-    // path R + s d is retracted to rotations, so each trial refits.
-    const double Wx = work(x);
-    double Wdx = 0;
-    if (!bones) {
-      fit_linear_into(d, dx, Fd);
-      Wdx = work(dx);
-    }
-    auto energy_at = [&](double s) {
-      if (!bones) return energy_along(c, F, Fx, &d, &Fd, s) - Wx - s * Wdx;
-      retract(F, d, s, Ftrial);
-      fit_into(c, Ftrial, xtrial, Fxtrial);
-      return energy_along(c, Ftrial, Fxtrial, nullptr, nullptr, 0.0) - work(xtrial);
-    };
-    auto ls = armijo_backtracking(energy_at, E, slope, options_);
-    if (!ls.success) {
-      const double E1 = energy_at(1.0);
-      Mat9X g1;
-      if (bones) {
-        gradient_into(c, Ftrial, Fxtrial, g1);
-        project_tangent(Ftrial, g1);
-      } else {
-        Mat9X F1 = F + d, Fx1 = Fx + Fd;
-        gradient_into(c, F1, Fx1, g1);
-      }
-      if (accept_at_roundoff(E1, g1.norm(), E, gn, conv.E0)) {
-        ls.success = true;
-        ls.step = 1.0;
-        ls.energy = E1;
-      } else {
-        res.status = "stalled: no step along the search direction decreases the energy or the gradient "
-                     "(round-off level reached; loosen rtol_grad / rtol_energy)";
-        break;
-      }
-    }
-    const double E_prev = E;
-    if (bones) {
-      retract(F, d, ls.step, Ftrial);
-      F = Ftrial;
-      fit_into(c, F, x, Fx);
-      E = ls.energy;
-    } else {
-      F += ls.step * d;
-      if (it % 50 == 0) {
-        fit_into(c, F, x, Fx);  // x*(F) is linear in F; refit now and then against drift
-      } else {
-        x += ls.step * dx;
-        Fx += ls.step * Fd;
-      }
-      E = (it % 50 == 0) ? energy_along(c, F, Fx, nullptr, nullptr, 0.0) - work(x) : ls.energy;
-    }
-    update_gradient();
-    gn = gR.norm();
-    res.iterations = it;
-    res.cg_iterations += cg_its;
-    last_cg = cg_its;
-    if (cg_after_refresh < 0) cg_after_refresh = cg_its;
-    res.history.push_back({it, E, gn, ls.step, seconds_since(t0), cg_its, ls.backtracks});
-    if (exact_allowed) exact_ok = exact ? ls.step >= 0.5 : ls.step == 1.0;
-    if (conv.test(E_prev, E, gn)) {
-      res.converged = true;
-      res.status = "converged";
-    }
-  }
-  res.neutral_axes.resize(neutral.size(), 3);
-  for (size_t i = 0; i < neutral.size(); ++i) {
-    res.neutral_bones.push_back(neutral[i].first);
-    res.neutral_axes.row(i) = neutral[i].second.transpose();
-  }
-  fit_into(c, F, x, Fx);
-  res.positions = x;
-  Mat9X Ft;
-  expand_unknowns(disc_, F, Ft);
-  res.F = Ft.transpose();
-  res.energy = E;
-  res.grad_norm = gn;
-  res.rel_energy_change = conv.rel_energy_change;
+  newton_minimize(newton, options_, gradient_floor(c), t0, res);
+  newton.finish(res);
   res.time_s = seconds_since(t0);
   return res;
 }

@@ -25,9 +25,10 @@
 #include <memory>
 
 #include "emu/linalg/modes.h"
-#include "emu/model/model.h"
+#include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
-#include "emu/solvers/solve_types.h"
+#include "emu/solvers/newton/result.h"
+#include "emu/solvers/solver_options.h"
 #include "emu/solvers/schur_preconditioner.h"
 #include "emu/solvers/woodbury.h"
 
@@ -63,13 +64,22 @@ class EmuSolver {
   double setup_seconds() const { return factor_seconds_ + modes_seconds_; }
   double factor_nnz() const { return acap_->factor().factor_nnz(); }
   const Model& model() const { return model_; }
-  int num_unknowns() const { return disc_.num_unknowns; }
-  /// Unknown of each tet (#T).
-  const Eigen::VectorXi& unknown_of_tet() const { return disc_.owner; }
+  int num_unknowns() const { return layout_.num_unknowns; }
+  /// The F unknown each tet uses (#T; see UnknownLayout).
+  const Eigen::VectorXi& tet_unknown() const { return layout_.tet_unknown; }
 
  private:
   struct Context;  // per-load data: activations, pinned share of F, joint targets, gravity terms
+  class Newton;    // one solve's state, as the Newton driver sees it (emu_solver.cpp)
   Context make_context(const LoadCase& load) const;
+  /// The round-off level of the gradient norm (see Convergence).
+  double gradient_floor(const Context& c) const;
+  /// Apply the preconditioner without the bone coarse correction (tangent-projected).
+  void base_precondition(const Mat9X& F, const Mat9X& in, Mat9X& out) const;
+  /// The work of the load at positions x (0 without gravity).
+  double load_work(const Context& c, const Eigen::MatrixX3d& x) const;
+  /// The start unknowns (9 x #unknowns) from a #T by 9 F0 (nullptr: identity).
+  Mat9X start_unknowns(const Eigen::MatrixXd* F0) const;
   // F: 9 x #unknowns; Fx, Fd: 9 x #T (F_t of the fit).
   double energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
                       const Mat9X* Fd, double s) const;
@@ -87,7 +97,7 @@ class EmuSolver {
   Mat9X to_cols(const Eigen::MatrixXd& rows) const;
 
   Model model_;
-  Discretization disc_;
+  UnknownLayout layout_;
   SolverOptions options_;
   EmuOptions emu_;
   std::unique_ptr<AcapOperator> acap_;

@@ -3,22 +3,18 @@
 // Hessians, assembled deterministically into a fixed pattern and factorised
 // by CHOLMOD every iteration (symbolic analysis once), Armijo backtracking.
 //
-// Movable bones are rigid bodies: x_v = R_b (X_v - P_b) + p_b. Their unknowns
-// are exponential-map increments, re-linearised every iteration
-// (R <- exp(omega^) R): a free bone has omega and a translation (6), a bone on
-// a ball joint (one vertex shared with a pinned vertex or fixed bone) turns
-// about it (omega, 3), a hinge (two or more collinear shared vertices) about
-// its axis (1). The bone rows border the soft-vertex matrix: per iteration one
-// factorisation of the soft block, #bone-dof back-substitutions and a small
-// dense Schur complement. The Newton matrix includes the rotation's second-
-// order term sum_v [ (f_v r_v^T + r_v f_v^T)/2 - (f_v . r_v) I ] (f = dE/dx,
-// r = x - p). Joints between two movable bones are not supported here.
+// Movable bones are rigid bodies (rigid_bones.h): exponential-map increments
+// re-linearised every iteration, their rows bordering the soft-vertex matrix
+// (one factorisation of the soft block, one back-substitution per bone unknown
+// and a small dense Schur complement per iteration).
 #include <memory>
 
 #include "emu/linalg/cholmod_factor.h"
 #include "emu/mesh/block_pattern.h"
-#include "emu/model/model.h"
-#include "emu/solvers/solve_types.h"
+#include "emu/model/unknown_layout.h"
+#include "emu/solvers/newton/result.h"
+#include "emu/solvers/rigid_bones.h"
+#include "emu/solvers/solver_options.h"
 
 namespace emu {
 
@@ -34,26 +30,41 @@ class FemSolver {
   double energy(const LoadCase& load, const Eigen::MatrixX3d& x) const;
   Eigen::MatrixX3d gradient(const LoadCase& load, const Eigen::MatrixX3d& x) const;
 
+  /// The Newton system in the solver's reduced unknowns z = (displacements of
+  /// the free soft vertices, 3 #free; then the bone increments: exponential-map
+  /// turns, translations of free bones) about the start state x0 (#V by 3; each
+  /// bone at the best rigid fit of its rows, on its joints), for tests:
+  /// the energy at increment z, and the gradient and dense Hessian (exact, or
+  /// PSD-filtered) at z = 0. Small meshes only (the Hessian is dense).
+  double reduced_energy(const LoadCase& load, const Eigen::MatrixX3d& x0, const Eigen::VectorXd& z);
+  void reduced_system(const LoadCase& load, const Eigen::MatrixX3d& x0, bool exact, Eigen::VectorXd& gradient,
+                      Eigen::MatrixXd& hessian);
+
   double setup_seconds() const { return setup_seconds_; }
   const Model& model() const { return model_; }
   double factor_nnz() const { return factor_.factor_nnz(); }
 
  private:
+  class Newton;  // one solve's state, as the Newton driver sees it (fem_solver.cpp)
+  /// The free rows of the gradient (3 #free) at x; fills the corner forces that vertex_forces reads.
   void free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x, const Eigen::VectorXd& act,
                      Eigen::VectorXd& g) const;
   double energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const Eigen::Vector3d& grav) const;
+  /// Element Hessians (144 per tet) at x and the assembled soft block.
   void assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, bool exact);
   /// dE/dx at the vertices that move with a bone, from the corner forces of the
   /// last free_gradient call (#V by 3, zero elsewhere).
   void vertex_forces(const Eigen::Vector3d& grav, Eigen::MatrixX3d& f) const;
+  /// The round-off level of the gradient norm (see Convergence).
+  double gradient_floor(const Eigen::VectorXd& act) const;
 
   Model model_;
-  Discretization disc_;
+  UnknownLayout layout_;
   SolverOptions options_;
   BlockPattern pattern_;
   CholmodFactor factor_;
+  RigidBones bones_;
   std::vector<double> element_, values_;
-  std::vector<int> bone_touching_;  // soft tets with a corner on a movable bone
   mutable std::vector<double> corner_, tet_energy_;
   double setup_seconds_ = 0;
 };

@@ -2,13 +2,13 @@
 
 namespace emu {
 
-SchurPreconditioner::SchurPreconditioner(const Model& model, const Discretization& disc, const AcapOperator& acap,
+SchurPreconditioner::SchurPreconditioner(const Model& model, const UnknownLayout& layout, const AcapOperator& acap,
                                          double alpha)
     : model_(model),
-      disc_(disc),
+      layout_(layout),
       acap_(acap),
       alpha_(alpha),
-      pattern_(model.tets, disc.free_index, disc.num_free, 3),
+      pattern_(model.tets, layout.free_index, layout.num_free, 3),
       Ainv_(model.tets.rows()),
       element_(model.tets.rows() * 144),
       values_(pattern_.nnz()) {
@@ -25,7 +25,7 @@ bool SchurPreconditioner::update(const std::vector<Mat9>& A) {
     Mat9 M = -alpha_ * wv(t) * wv(t) * Ainv_[t];
     M.diagonal().array() += wv(t);
     M = (0.5 * (M + M.transpose())).eval();
-    Eigen::Map<Mat12>(element_.data() + t * 144) = position_hessian(disc_.geometry.grad[t], M);
+    Eigen::Map<Mat12>(element_.data() + t * 144) = position_hessian(layout_.geometry.grad[t], M);
   }
   pattern_.assemble(element_.data(), values_.data());
   ok_ = factor_.factorize(values_.data());

@@ -12,14 +12,14 @@
 
 #include "emu/linalg/cholmod_factor.h"
 #include "emu/mesh/block_pattern.h"
-#include "emu/model/model.h"
+#include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
 
 namespace emu {
 
 class SchurPreconditioner {
  public:
-  SchurPreconditioner(const Model& model, const Discretization& disc, const AcapOperator& acap, double alpha);
+  SchurPreconditioner(const Model& model, const UnknownLayout& layout, const AcapOperator& acap, double alpha);
 
   /// Rebuild from SPD blocks A_t; false if S could not be factorised.
   bool update(const std::vector<Mat9>& A);
@@ -31,7 +31,7 @@ class SchurPreconditioner {
 
  private:
   const Model& model_;
-  const Discretization& disc_;
+  const UnknownLayout& layout_;
   const AcapOperator& acap_;
   double alpha_;
   BlockPattern pattern_;

@@ -7,16 +7,16 @@ extern "C" void dsyrk_(const char* uplo, const char* trans, const int* n, const 
 
 namespace emu {
 
-Woodbury::Woodbury(const Model& model, const Discretization& disc, const AcapOperator& acap, const Modes& modes,
+Woodbury::Woodbury(const Model& model, const UnknownLayout& layout, const AcapOperator& acap, const Modes& modes,
                    double alpha)
     : model_(model),
-      disc_(disc),
+      layout_(layout),
       acap_(acap),
       ks_(static_cast<int>(modes.values.size())),
       alpha_(alpha),
       values_(modes.values),
       psi_(modes.vectors),
-      Ainv_(disc.num_unknowns) {
+      Ainv_(layout.num_unknowns) {
   psi_vertex_ = Eigen::MatrixXd::Zero(model.rest.rows(), ks_);
   if (ks_) acap.expand(psi_, psi_vertex_);
 }
@@ -24,9 +24,9 @@ Woodbury::Woodbury(const Model& model, const Discretization& disc, const AcapOpe
 void Woodbury::mode_gradients(Eigen::Index u, Eigen::Matrix<double, 3, Eigen::Dynamic>& g) const {
   g.setZero(3, ks_);
   const Eigen::VectorXd& wv = acap_.weight_volume();
-  for (int i = disc_.unknown_ptr[u]; i < disc_.unknown_ptr[u + 1]; ++i) {
-    const int t = disc_.unknown_tets[i];
-    const ShapeGrads& b = disc_.geometry.grad[t];
+  for (int i = layout_.unknown_ptr[u]; i < layout_.unknown_ptr[u + 1]; ++i) {
+    const int t = layout_.unknown_tets[i];
+    const ShapeGrads& b = layout_.geometry.grad[t];
     for (int a = 0; a < 4; ++a) g.noalias() += (wv(t) * b.row(a).transpose()) * psi_vertex_.row(model_.tets(t, a));
   }
 }
@@ -87,7 +87,7 @@ void Woodbury::apply(const Mat9X& r, Mat9X& out) const {
   // s = X^-1 B z with B z = Psi^T (C z): entry c + 3 l is (Psi^T y)(l, c).
   Mat9X per_tet;
   Eigen::MatrixX3d y;
-  acap_.apply_C(per_tet_view(disc_, out, per_tet), y);
+  acap_.apply_C(per_tet_view(layout_, out, per_tet), y);
   const Eigen::MatrixXd Bz = psi_.transpose() * y;  // ks x 3
   Eigen::VectorXd t(3 * ks_);
   for (int l = 0; l < ks_; ++l)
@@ -100,13 +100,13 @@ void Woodbury::apply(const Mat9X& r, Mat9X& out) const {
   const Eigen::MatrixX3d u = psi_ * S;
   Mat9X bts;
   acap_.apply_CT(u, per_tet);
-  reduce_to_unknowns(disc_, per_tet, bts);
+  reduce_to_unknowns(layout_, per_tet, bts);
 #pragma omp parallel for schedule(static)
   for (long t = 0; t < m; ++t) out.col(t).noalias() += Ainv_[t] * bts.col(t);
 }
 
 Eigen::MatrixXd Woodbury::dense_B() const {
-  const long m = disc_.num_unknowns;
+  const long m = layout_.num_unknowns;
   Eigen::MatrixXd B = Eigen::MatrixXd::Zero(3 * ks_, 9 * m);
   Eigen::Matrix<double, 3, Eigen::Dynamic> g(3, ks_);
   for (long u = 0; u < m; ++u) {

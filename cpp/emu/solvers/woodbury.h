@@ -23,7 +23,7 @@
 
 #include "emu/energy/types.h"
 #include "emu/linalg/modes.h"
-#include "emu/model/model.h"
+#include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
 
 namespace emu {
@@ -31,7 +31,7 @@ namespace emu {
 class Woodbury {
  public:
   /// modes  scalar constrained modes (acap.dofs() by ks) and their eigenvalues
-  Woodbury(const Model& model, const Discretization& disc, const AcapOperator& acap, const Modes& modes,
+  Woodbury(const Model& model, const UnknownLayout& layout, const AcapOperator& acap, const Modes& modes,
            double alpha);
 
   /// Invert the blocks A_u (one per unknown, SPD) and form X with one symmetric
@@ -51,7 +51,7 @@ class Woodbury {
   void mode_gradients(Eigen::Index u, Eigen::Matrix<double, 3, Eigen::Dynamic>& g) const;
 
   const Model& model_;
-  const Discretization& disc_;
+  const UnknownLayout& layout_;
   const AcapOperator& acap_;
   int ks_;
   double alpha_;

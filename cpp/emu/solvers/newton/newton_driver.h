@@ -1,0 +1,97 @@
+#pragma once
+// The Newton loop, written once for both solvers.
+//
+// Each iteration: poll for an interrupt, ask the problem for a search
+// direction, backtrack along it (Armijo), take the step, record it, test
+// convergence. When no step lowers the energy, the full step is taken if the
+// energy is unchanged to round-off and the gradient falls; otherwise the solve
+// stops as "stalled". The problem decides everything that is specific to it:
+// what the unknowns are, how the direction is computed (a Cholesky, CG), how a
+// trial state is built (a linear step, a retraction to rotations).
+//
+// A Problem provides, at its current iterate:
+//   double energy() const;          double grad_norm() const;
+//   SearchDirection direction(int iteration);   // computed at the current iterate
+//   double trial_energy(double s);              // energy at step s along it (non-finite: rejected)
+//   double trial_grad_norm(double s);           // gradient norm there (round-off rule)
+//   double take_step(int iteration, double s, double E_trial);  // move; returns the new energy
+#include <string>
+
+#include "emu/solvers/newton/convergence.h"
+#include "emu/solvers/newton/line_search.h"
+#include "emu/solvers/newton/result.h"
+#include "emu/solvers/newton/stopwatch.h"
+#include "emu/solvers/solver_options.h"
+
+namespace emu {
+
+struct SearchDirection {
+  bool ok = true;
+  std::string failure;  // why no direction could be found (the solve's status)
+  double slope = 0;     // g . d (< 0 for a descent direction)
+  int cg_iterations = 0;
+  int filtered = 0;        // 1 if the step fell back to the PSD-filtered Hessian
+  int exact_failed = 0;    // failed factorisations of the exact Hessian
+  static SearchDirection failed(std::string why) {
+    SearchDirection d;
+    d.ok = false;
+    d.failure = std::move(why);
+    return d;
+  }
+};
+
+/// Minimises the problem from its current iterate; fills every field of res
+/// but positions, F and the neutral modes (the problem's own output).
+/// floor: the round-off level of the gradient norm (see Convergence).
+template <class Problem>
+void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::time_point t0, SolveResult& res) {
+  double E = p.energy();
+  Convergence conv{o.rtol_grad, o.rtol_energy, E, p.grad_norm(), floor};
+  res.grad_norm0 = conv.g0;
+  res.history.push_back({0, E, conv.g0, 0.0, seconds_since(t0), 0, 0});
+  res.status = "max iterations reached";
+  if (conv.initial()) {
+    res.converged = true;
+    res.status = "converged: initial state is in equilibrium";
+  }
+  for (int it = 1; !res.converged && it <= o.max_iterations; ++it) {
+    if (o.interrupted && o.interrupted()) {
+      res.status = "interrupted";
+      break;
+    }
+    const SearchDirection d = p.direction(it);
+    res.filtered_steps += d.filtered;
+    res.exact_attempts_failed += d.exact_failed;
+    if (!d.ok) {
+      res.status = d.failure;
+      break;
+    }
+    auto ls = armijo_backtracking([&](double s) { return p.trial_energy(s); }, E, d.slope, o);
+    if (!ls.success) {
+      const double E1 = p.trial_energy(1.0);
+      if (!accept_at_roundoff(E1, p.trial_grad_norm(1.0), E, p.grad_norm(), conv.E0)) {
+        res.status = "stalled: no step along the search direction decreases the energy or the gradient "
+                     "(round-off level reached; loosen rtol_grad / rtol_energy)";
+        break;
+      }
+      ls.success = true;
+      ls.step = 1.0;
+      ls.energy = E1;
+    }
+    const double E_prev = E;
+    E = p.take_step(it, ls.step, ls.energy);
+    const double gn = p.grad_norm();
+    res.iterations = it;
+    res.cg_iterations += d.cg_iterations;
+    res.history.push_back({it, E, gn, ls.step, seconds_since(t0), d.cg_iterations, ls.backtracks});
+    if (conv.test(E_prev, E, gn)) {
+      res.converged = true;
+      res.status = "converged";
+    }
+  }
+  res.energy = E;
+  res.grad_norm = res.history.back().grad_norm;
+  res.rel_energy_change = conv.rel_energy_change;
+}
+
+}  // namespace emu

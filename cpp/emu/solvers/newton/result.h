@@ -1,0 +1,48 @@
+#pragma once
+// What a solve returns: the state, the statistics, a record per iteration.
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace emu {
+
+struct IterationRecord {
+  int iteration = 0;
+  double energy = 0, grad_norm = 0, step = 0, time_s = 0;
+  int cg_iterations = 0, backtracks = 0;
+};
+
+/// A turn of a movable bone that nothing resists (no curvature of the energy
+/// along it): the step leaves it alone and the solve reports it.
+struct NeutralMode {
+  int bone;
+  Eigen::Vector3d axis;  // unit rotation axis (or, for a free bone that can slide, the direction)
+};
+
+struct SolveResult {
+  Eigen::MatrixX3d positions;  // #V by 3
+  Eigen::MatrixXd F;           // #T by 9 deformation-gradient unknowns (EMU), empty for FEM
+  bool converged = false;
+  std::string status;
+  int iterations = 0, cg_iterations = 0;
+  int filtered_steps = 0;  // iterations that needed the PSD-filtered Hessian (not the exact one)
+  int exact_attempts_failed = 0;  // FEM: factorisations of the exact Hessian that found it indefinite
+  double energy = 0, grad_norm = 0, grad_norm0 = 0, rel_energy_change = 0;
+  double time_s = 0;  // solve time (setup excluded)
+  std::vector<IterationRecord> history;  // entry 0 is the initial state
+  // Neutral modes met by the last step: movable bone ids and unit axes (rows).
+  std::vector<int> neutral_bones;
+  Eigen::MatrixX3d neutral_axes;
+
+  void set_neutral_modes(const std::vector<NeutralMode>& modes) {
+    neutral_bones.clear();
+    neutral_axes.resize(static_cast<Eigen::Index>(modes.size()), 3);
+    for (size_t i = 0; i < modes.size(); ++i) {
+      neutral_bones.push_back(modes[i].bone);
+      neutral_axes.row(static_cast<Eigen::Index>(i)) = modes[i].axis.transpose();
+    }
+  }
+};
+
+}  // namespace emu

@@ -1,0 +1,8 @@
+#pragma once
+// Wall-clock time for solve statistics.
+#include <chrono>
+
+namespace emu {
+using Clock = std::chrono::steady_clock;
+inline double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+}  // namespace emu

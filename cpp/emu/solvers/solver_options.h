@@ -1,0 +1,43 @@
+#pragma once
+// Options of the FEM and EMU solvers.
+#include <functional>
+
+namespace emu {
+
+struct SolverOptions {
+  int max_iterations = 500;
+  // Convergence (both must hold, see newton/convergence.h):
+  double rtol_grad = 1e-6;     // |g_k| <= rtol_grad |g_0|
+  double rtol_energy = 1e-10;  // E_{k-1} - E_k <= rtol_energy (E_0 - E_k)
+  double armijo = 1e-4;        // sufficient-decrease constant
+  int max_backtracks = 40;     // step halvings before the line search gives up
+  // Element Hessians: negative eigenvalues clamped (0) or reflected (1); see psd_project.h.
+  int eigen_filter = 0;
+  // Try the unfiltered Hessian first when it is positive definite (FEM: the
+  // Cholesky succeeds; EMU: CG sees no negative curvature); fall back to the
+  // filtered one. Restores Newton's quadratic end game.
+  bool exact_when_definite = true;
+  // Polled once per iteration; returning true stops the solve with status
+  // "interrupted" (the Python bindings use it for Ctrl-C).
+  std::function<bool()> interrupted;
+};
+
+enum class EmuStep { Woodbury, NewtonKrylov };
+// Newton-Krylov preconditioner: the paper's Woodbury approximation (no
+// factorisation after setup), or the exact inverse through the position-space
+// Schur complement (a factorisation per lagged rebuild).
+enum class EmuPreconditioner { Woodbury, Schur };
+
+struct EmuOptions {
+  double alpha = 0.0;      // absolute ACAP stiffness (Python passes alpha_rel * mu_ref)
+  int modes = 24;          // k: ACAP modes in the Woodbury term (rounded up to a multiple of 3)
+  EmuStep step = EmuStep::NewtonKrylov;
+  int cg_max_iterations = 500;   // per Newton-Krylov step
+  double cg_forcing_max = 0.5;       // Eisenstat-Walker eta_k = min(max, (|g_k| / |g_0|)^exponent)
+  double cg_forcing_exponent = 0.5;
+  EmuPreconditioner preconditioner = EmuPreconditioner::Woodbury;
+  int preconditioner_refresh = 3;  // Newton-Krylov: rebuild the Woodbury preconditioner every n steps
+  bool bone_coarse_space = true;   // movable bones: add the bone-rotation coarse correction (see emu_solver.cpp)
+};
+
+}  // namespace emu
