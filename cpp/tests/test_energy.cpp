@@ -2,9 +2,14 @@
 #include <random>
 
 #include "check.h"
+#include "emu/energy/acap_coupling.h"
 #include "emu/energy/fiber.h"
+#include "emu/energy/gravity_work.h"
+#include "emu/energy/joint_spring.h"
+#include "emu/energy/material.h"
 #include "emu/energy/psd_project.h"
 #include "emu/energy/stable_neo_hookean.h"
+#include "emu/linalg/rotation.h"
 
 using namespace emu;
 
@@ -99,6 +104,114 @@ TEST(psd_projection_is_psd_and_keeps_psd_input) {
     std::sort(a0.data(), a0.data() + 9);
     CHECK((a0 - e1.eigenvalues()).norm() <= 1e-9 * H.norm());
   }
+}
+
+TEST(material_hessians_match_the_single_versions) {
+  const TetMaterial m{mu, lam, 3e4, Vec3(0.2, 0.3, -0.9).normalized()};
+  for (int k = 0; k < 10; ++k) {
+    const Mat3 F = random_F(0.4);
+    Mat9 psd, exact;
+    material_hessians(m, F, EigenFilter::Clamp, &psd, &exact);
+    CHECK((psd - material_hessian_psd(m, F)).norm() == 0.0);
+    CHECK((exact - material_hessian(m, F)).norm() == 0.0);
+    const Mat9 Hfd = fd_hessian(F, [&](const Mat3& G) { return material_stress(m, G); });
+    CHECK((exact - Hfd).norm() <= 1e-6 * (1.0 + exact.norm()));
+  }
+}
+
+TEST(acap_coupling_derivatives_match_finite_differences) {
+  const double alpha = 3e5, wv = 0.7;
+  std::normal_distribution<double> n(0.0, 0.3);
+  for (int k = 0; k < 10; ++k) {
+    Vec9 f, fx;
+    for (int i = 0; i < 9; ++i) f(i) = n(rng), fx(i) = n(rng);
+    const Vec9 g = acap_coupling::gradient(f, fx, alpha, wv);
+    const double h = 1e-6;
+    Vec9 gfd, gxfd;
+    Mat9 Hfd;
+    for (int i = 0; i < 9; ++i) {
+      Vec9 a = f, b = f, ax = fx, bx = fx;
+      a(i) += h, b(i) -= h, ax(i) += h, bx(i) -= h;
+      gfd(i) = (acap_coupling::energy(a, fx, alpha, wv) - acap_coupling::energy(b, fx, alpha, wv)) / (2 * h);
+      gxfd(i) = (acap_coupling::energy(f, ax, alpha, wv) - acap_coupling::energy(f, bx, alpha, wv)) / (2 * h);
+      Hfd.col(i) = (acap_coupling::gradient(a, fx, alpha, wv) - acap_coupling::gradient(b, fx, alpha, wv)) / (2 * h);
+    }
+    CHECK((g - gfd).norm() <= 1e-6 * (1 + g.norm()));
+    CHECK((-g - gxfd).norm() <= 1e-6 * (1 + g.norm()));  // dE/dfx = -dE/df
+    CHECK((Hfd - acap_coupling::hessian_diagonal(alpha, wv) * Mat9::Identity()).norm() <= 1e-6 * alpha * wv);
+  }
+  CHECK(acap_coupling::energy(Vec9::Ones(), Vec9::Ones(), alpha, wv) == 0.0);
+}
+
+TEST(gravity_work_derivatives_match_finite_differences) {
+  const int n = 5;
+  Eigen::VectorXd mass(n);
+  mass << 1.0, 0.5, 2.0, 0.25, 3.0;
+  const Vec3 g(0.1, -9.81, 0.3);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  Eigen::MatrixX3d x(n, 3);
+  for (int i = 0; i < 3 * n; ++i) x.data()[i] = nd(rng);
+  const double h = 1e-5;
+  double err = 0;
+  for (int v = 0; v < n; ++v)
+    for (int c = 0; c < 3; ++c) {
+      Eigen::MatrixX3d a = x, b = x;
+      a(v, c) += h, b(v, c) -= h;
+      const double fd = (gravity_work::energy(mass, a, g) - gravity_work::energy(mass, b, g)) / (2 * h);
+      err = std::max(err, std::abs(fd - gravity_work::vertex_gradient(mass(v), g)(c)));
+    }
+  CHECK(err <= 1e-8);
+  // linear: the work of a sum is the sum of the works (zero Hessian)
+  const Eigen::MatrixX3d y = 2.0 * x;
+  CHECK_CLOSE(gravity_work::energy(mass, x + y, g), gravity_work::energy(mass, x, g) + gravity_work::energy(mass, y, g),
+              1e-10 * (1 + std::abs(gravity_work::energy(mass, x, g))));
+}
+
+TEST(joint_spring_derivatives_match_finite_differences) {
+  const double k = 2.5;
+  for (int trial = 0; trial < 10; ++trial) {
+    const Mat3 R = nearest_rotation(random_F(0.8));
+    // Euclidean gradient in R
+    const Mat3 G = fd_stress(R, [&](const Mat3& M) { return joint_spring::energy(M, k); });
+    CHECK((G - joint_spring::gradient(k)).norm() <= 1e-7);
+    // exponential-map coordinates R(w) = exp([w]_x) R at w = 0
+    auto E = [&](const Vec3& w) { return joint_spring::energy(rotation_exp(w) * R, k); };
+    const double h = 1e-4;
+    Vec3 gfd;
+    Mat3 Hfd;
+    for (int i = 0; i < 3; ++i) {
+      const Vec3 ei = h * Vec3::Unit(i);
+      gfd(i) = (E(ei) - E(-ei)) / (2 * h);
+      for (int j = 0; j < 3; ++j) {
+        const Vec3 ej = h * Vec3::Unit(j);
+        Hfd(i, j) = (E(ei + ej) - E(ei - ej) - E(ej - ei) + E(-ei - ej)) / (4 * h * h);
+      }
+    }
+    CHECK((gfd - joint_spring::expmap_gradient(R, k)).norm() <= 1e-7 * k);
+    CHECK((Hfd - joint_spring::expmap_hessian(R, k)).norm() <= 1e-5 * k);
+  }
+  CHECK_CLOSE(joint_spring::energy(Mat3::Identity(), k), 0.0, 1e-15);
+  // k (1 - cos theta)
+  CHECK_CLOSE(joint_spring::energy(rotation_exp(Vec3(0, 0, 0.6)), k), k * (1 - std::cos(0.6)), 1e-14);
+}
+
+TEST(rotation_helpers) {
+  const Vec3 w(0.3, -0.5, 0.2);
+  const Mat3 R = rotation_exp(w);
+  CHECK((R.transpose() * R - Mat3::Identity()).norm() <= 1e-14);
+  CHECK_CLOSE(R.determinant(), 1.0, 1e-14);
+  CHECK((R - Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix()).norm() <= 1e-14);
+  CHECK((nearest_rotation(1.7 * R) - R).norm() <= 1e-13);
+  Eigen::MatrixX3d X(5, 3);
+  X << 0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0, 3, 1, 1, 1;
+  const Eigen::MatrixX3d Y = (X * R.transpose()).rowwise() + Eigen::RowVector3d(1, 2, 3);
+  CHECK((best_rotation(X, Y) - R).norm() <= 1e-12);
+  const Vec3 a = Vec3(1, 2, 0).normalized(), b = Vec3(0, -1, 3).normalized();
+  CHECK((rotation_between(a, b) * a - b).norm() <= 1e-14);
+  CHECK((rotation_between(a, -a) * a + a).norm() <= 1e-14);
+  const Mat3 T = project_to_tangent(R, random_F(1.0));
+  const Mat3 K = R.transpose() * T;
+  CHECK((K + K.transpose()).norm() <= 1e-13);  // R^T T is skew
 }
 
 TEST_MAIN()
