@@ -171,6 +171,7 @@ void bind_solvers(py::module_& m) {
       .def("hessian_product", &EmuSolver::hessian_product, py::arg("load"), py::arg("F"), py::arg("V"),
            py::arg("exact") = false, gil())
       .def("woodbury_solve", &EmuSolver::woodbury_solve, py::arg("load"), py::arg("F"), py::arg("R"), gil())
+      .def("schur_solve", &EmuSolver::schur_solve, py::arg("load"), py::arg("F"), py::arg("R"), gil())
       .def("block_hessians", &EmuSolver::block_hessians, py::arg("load"), py::arg("F"), py::arg("exact") = false,
            gil())
       .def("mode_matrix", &EmuSolver::mode_matrix)

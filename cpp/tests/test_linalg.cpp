@@ -90,4 +90,15 @@ TEST(lowest_modes_match_dense_eigensolver) {
   CHECK((m.vectors.transpose() * m.vectors - Eigen::MatrixXd::Identity(12, 12)).norm() <= 1e-8);
 }
 
+TEST(cholmod_empty_matrix_factorises_and_solves_nothing) {
+  // A scene whose every vertex is pinned or on a bone has no soft unknowns.
+  CholmodFactor f;
+  const int col_ptr[1] = {0};
+  f.analyze(0, col_ptr, nullptr);
+  CHECK(f.factorize(nullptr));
+  CHECK(f.factorized());
+  f.solve(nullptr, nullptr, 3);
+  CHECK(f.rows() == 0 && f.factor_nnz() == 0.0);
+}
+
 TEST_MAIN()

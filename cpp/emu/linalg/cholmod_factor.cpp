@@ -39,6 +39,7 @@ void CholmodFactor::analyze(int n, const int* col_ptr, const int* row_index) {
   if (A_) cholmod_free_sparse(&A_, &common_);
   factorized_ = false;
   n_ = n;
+  if (n == 0) return;  // nothing to factorise (every vertex pinned or on a bone): solves are empty
   const size_t nnz = static_cast<size_t>(col_ptr[n]);
   A_ = cholmod_allocate_sparse(n, n, nnz, /*sorted*/ 1, /*packed*/ 1, /*stype*/ 1, CHOLMOD_REAL,
                                &common_);
@@ -53,6 +54,7 @@ void CholmodFactor::analyze(int n, const int* col_ptr, const int* row_index) {
 }
 
 bool CholmodFactor::factorize(const double* values) {
+  if (n_ == 0) return factorized_ = true;
   if (!A_ || !L_) throw std::logic_error("CholmodFactor::factorize before analyze");
   const size_t nnz = static_cast<const int*>(A_->p)[n_];
   std::memcpy(A_->x, values, sizeof(double) * nnz);
@@ -68,6 +70,7 @@ bool CholmodFactor::factorize(const double* values) {
 
 void CholmodFactor::solve(const double* b, double* x, int nrhs) const {
   if (!factorized_) throw std::logic_error("CholmodFactor::solve before a successful factorize");
+  if (n_ == 0) return;
   cholmod_dense B;
   std::memset(&B, 0, sizeof(B));
   B.nrow = n_;

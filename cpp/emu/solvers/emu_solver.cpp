@@ -299,6 +299,18 @@ Eigen::MatrixXd EmuSolver::woodbury_solve(const LoadCase& load, const Eigen::Mat
   return out.transpose();
 }
 
+Eigen::MatrixXd EmuSolver::schur_solve(const LoadCase& load, const Eigen::MatrixXd& Frows,
+                                       const Eigen::MatrixXd& Rrows) {
+  if (!schur_) throw std::invalid_argument("this solver has no Schur-complement preconditioner (preconditioner='schur')");
+  const Context c = make_context(load);
+  std::vector<Mat9> A;
+  blocks_into(c, to_cols(Frows), &A, nullptr);
+  if (!schur_->update(A)) throw std::runtime_error("the Schur complement S is not positive definite");
+  Mat9X out;
+  schur_->apply(to_cols(Rrows), out);
+  return out.transpose();
+}
+
 Eigen::MatrixXd EmuSolver::block_hessians(const LoadCase& load, const Eigen::MatrixXd& Frows, bool exact) const {
   const Context c = make_context(load);
   std::vector<Mat9> A_filtered, A_exact;

@@ -52,6 +52,10 @@ class EmuSolver {
                                   bool exact = false) const;
   /// H_k^-1 R with the solver's k modes.
   Eigen::MatrixXd woodbury_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R) const;
+  /// H^-1 R through the Schur-complement preconditioner (the exact inverse of the
+  /// filtered Hessian); only for a solver built with preconditioner = Schur.
+  /// Refactorises the preconditioner at F (each solve rebuilds it at its start).
+  Eigen::MatrixXd schur_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R);
   /// Blocks A_u, #unknowns by 81 (column-major 9x9 per row); filtered unless exact.
   Eigen::MatrixXd block_hessians(const LoadCase& load, const Eigen::MatrixXd& F, bool exact = false) const;
   Eigen::MatrixXd mode_matrix() const { return woodbury_->dense_B(); }
