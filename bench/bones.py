@@ -64,7 +64,7 @@ def main(argv=None):
                 print(f"<!-- {name} {method}: {sol.status} -->")
             res[method] = (sol, wall, *measure(scene, bone)(sol))
         fem, emu_ = res["fem"], res["emu"]
-        diag = float(np.linalg.norm(scene.points.max(0) - scene.points.min(0)))
+        diag = emu.bbox_diagonal(scene.points)
         err = emu.vertex_error(emu_[0], fem[0])
         dt = np.linalg.norm(emu_[3] - fem[3]) / diag
         print(f"| {name} | {len(scene.tets)} | {fem[1]:.2f} ({fem[0].iterations}) | "

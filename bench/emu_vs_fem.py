@@ -18,19 +18,12 @@ import platform
 import sys
 import time
 
-import numpy as np
-
 import emu
-from emu.meshes import fusiform
 
 
 def build_scene(tets: int):
-    m = fusiform(tets=tets)
-    s = emu.Scene(m.points, m.tets)
-    s.add_muscle("belly", ~m.is_tendon, m.fibers[~m.is_tendon])
-    s.add_tendon("tendons", m.is_tendon)
-    s.pin(m.proximal)
-    return s
+    """The built-in fusiform muscle (emu.scenes.fusiform), proximal end pinned."""
+    return emu.scenes.fusiform(tets=tets, pins=("proximal",))
 
 
 def run(method, scene, activation, **kw):

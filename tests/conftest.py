@@ -1,15 +1,33 @@
-"""Shared helpers for the emu test suite: small scenes and an independent
-numpy discretisation (G, volumes) that does not go through emu's C++ code."""
+"""Shared helpers for the emu test suite: small scenes, the shared research
+scenes (skipped the same way everywhere when absent) and an independent numpy
+discretisation (G, volumes) that does not go through emu's C++ code."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import emu
 from emu.meshes import fusiform
 
+# the authors' research scenes, beside the repository (/work/shared/data)
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def shared_path(name: str) -> Path:
+    """The mesh of the shared research scene ``name`` (SHARED_DATA/<name>/<name>.vtu);
+    skips the calling test when it is not there."""
+    path = SHARED_DATA / name / f"{name}.vtu"
+    if not path.exists():
+        pytest.skip(f"shared data not found at {path}")
+    return path
+
+
+def shared_scene(name: str, **load_options):
+    """emu.io.load_scene of the shared research scene ``name`` (see shared_path);
+    load_options go to load_scene (free_bones, fibers, warn)."""
+    return emu.io.load_scene(shared_path(name), **load_options)
 
 
 def bone_muscle_bone(bone_fraction, r=3):
@@ -25,21 +43,29 @@ def bone_muscle_bone(bone_fraction, r=3):
     return s, m, z
 
 
+def gap_scene():
+    """Two bones that do not touch (a gap at the elbow), an L-shaped muscle
+    between them, and a hinge declared at the corner (axis z)."""
+    pts, tets, lab = emu.meshes.block_mesh(
+        {"upper": [(0, j) for j in range(2, 6)], "lower": [(i, 0) for i in range(2, 6)],
+         "muscle": [(1, j) for j in range(1, 5)] + [(i, 1) for i in range(2, 5)]}, 1)
+    s = emu.Scene(pts, tets)
+    s.add_bone("upper", lab == 0)
+    s.add_bone("lower", lab == 1, fixed=False)
+    s.add_muscle("muscle", lab == 2)
+    return s
+
+
+PIN_SETS = {"proximal": ("proximal",), "both": ("proximal", "distal"), None: ()}
+
+
 def small_scene(r=2, pin="proximal", tendon_fraction=0.12, **muscle_kw):
-    """A fusiform muscle (tendon caps as a stiff tendon part, unless
-    tendon_fraction=0) pinned at its proximal end. Returns (scene, mesh)."""
-    m = fusiform(r, tendon_fraction=tendon_fraction)
-    s = emu.Scene(m.points, m.tets)
-    if m.is_tendon.any():
-        s.add_muscle("belly", ~m.is_tendon, m.fibers[~m.is_tendon], **muscle_kw)
-        s.add_tendon("tendons", m.is_tendon)
-    else:
-        s.add_muscle("belly", np.arange(len(m.tets)), m.fibers, **muscle_kw)
-    if pin == "proximal":
-        s.pin(m.proximal)
-    elif pin == "both":
-        s.pin(np.concatenate([m.proximal, m.distal]))
-    return s, m
+    """The built-in fusiform muscle (emu.scenes.fusiform: tendon caps as a stiff
+    tendon part, unless tendon_fraction=0) pinned at its proximal end (pin="both":
+    both ends, None: nowhere). Returns (scene, mesh): the mesh (emu.meshes.fusiform)
+    for its tendon mask and end faces."""
+    s = emu.scenes.fusiform(r, tendon_fraction=tendon_fraction, pins=PIN_SETS[pin], **muscle_kw)
+    return s, fusiform(r, tendon_fraction=tendon_fraction)
 
 
 def rest_geometry(points, tets):

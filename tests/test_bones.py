@@ -5,11 +5,11 @@ import pytest
 import emu
 from emu.bones import bone_motion, signed_angle
 from emu.scenes import arm
-from conftest import SHARED_DATA
+from conftest import gap_scene, shared_path
 
 
 def hinge_vertices(scene, a, b):
-    (j,) = [j for j in scene.joints() if set(j["bones"]) == {a, b}]
+    (j,) = [j for j in scene.joints() if set(j.bones) == {a, b}]
     return j
 
 
@@ -20,8 +20,8 @@ def small_arm():
 
 def test_arm_joint_is_detected_as_a_hinge(small_arm):
     j = hinge_vertices(small_arm, "humerus", "forearm")
-    assert j["kind"] == "hinge" and len(j["vertices"]) >= 2
-    np.testing.assert_allclose(np.abs(j["axis"]), [0, 0, 1], atol=1e-12)
+    assert j.kind == "hinge" and len(j.vertices) >= 2
+    np.testing.assert_allclose(np.abs(j.axis), [0, 0, 1], atol=1e-12)
 
 
 @pytest.mark.parametrize("method", ["fem", "emu"])
@@ -36,7 +36,7 @@ def test_flexor_bends_and_extensor_straightens_the_elbow(small_arm, method):
         bm = bone_motion(s, sol, "forearm")
         turns[muscle] = signed_angle(bm.R, [0, 0, 1])
         # the hinge vertices stay put, the forearm turns about them and stays rigid
-        np.testing.assert_allclose(sol.positions[j["vertices"]], s.points[j["vertices"]], atol=1e-9)
+        np.testing.assert_allclose(sol.positions[j.vertices], s.points[j.vertices], atol=1e-9)
         assert bm.rigidity < 1e-6
         hum = np.unique(s.tets[s.parts["humerus"].tets].ravel())
         np.testing.assert_array_equal(sol.positions[hum], s.points[hum])
@@ -104,7 +104,7 @@ def test_emu_and_fem_agree_on_the_arm_as_alpha_grows(small_arm):
 def test_simple_joint_free_bone_emu_vs_fem():
     """The shared scene: contracting the muscle turns the free bottom bone about
     the hinge edge; EMU's angle is within 2 degrees of FEM's (README)."""
-    path = SHARED_DATA / "simple_joint" / "simple_joint.vtu"
+    path = shared_path("simple_joint")
     s = emu.io.load_scene(path, free_bones=["bottom_bone"], warn=False)
     hinge = [2450, 2451]
     angles = {}
@@ -147,13 +147,13 @@ def test_joint_between_two_movable_bones(small_arm):
     s.add_bone("c", lab == 2, fixed=False)
     for i, name in enumerate(("m1", "m2", "m3")):
         s.add_muscle(name, lab == 3 + i, [1, 1, 0])
-    kinds = {tuple(sorted(j["bones"])): j["kind"] for j in s.joints()}
+    kinds = {tuple(sorted(j.bones)): j.kind for j in s.joints()}
     assert kinds[("a", "b")] == "hinge" and kinds[("b", "c")] == "hinge"
     with pytest.raises(ValueError, match="two movable bones"):
         emu.Solver(s, "fem")
     sol = emu.Solver(s, "emu").solve({"m1": 0.2, "m2": 0.2}, normalized=True)
     assert sol.converged, sol.status
-    jb = [j for j in s.joints() if set(j["bones"]) == {"b", "c"}][0]["vertices"]
+    jb = [j for j in s.joints() if set(j.bones) == {"b", "c"}][0].vertices
     for bone in ("b", "c"):
         assert bone_motion(s, sol, bone).rigidity < 1e-5
     # the shared hinge vertices sit where both bones put them
@@ -166,12 +166,12 @@ def test_joint_between_two_movable_bones(small_arm):
 def test_head_on_a_ball_joint_emu_vs_fem():
     s = emu.scenes.neck(1)
     (j,) = s.joints()
-    assert j["kind"] == "ball" and len(j["vertices"]) == 1
+    assert j.kind == "ball" and len(j.vertices) == 1
     res = {}
     for method in ("fem", "emu"):
         sol = emu.Solver(s, method).solve({"left_front": 0.4}, normalized=True)
         assert sol.converged, sol.status
-        np.testing.assert_allclose(sol.positions[j["vertices"]], s.points[j["vertices"]], atol=1e-12)
+        np.testing.assert_allclose(sol.positions[j.vertices], s.points[j.vertices], atol=1e-12)
         bm = bone_motion(s, sol, "head")
         assert bm.rigidity < 1e-6
         w = np.array([bm.R[2, 1] - bm.R[1, 2], bm.R[0, 2] - bm.R[2, 0], bm.R[1, 0] - bm.R[0, 1]])
@@ -182,78 +182,7 @@ def test_head_on_a_ball_joint_emu_vs_fem():
     assert abs(res["emu"][0] - angle) < 1.5 and res["emu"][1] @ axis > 0.99, res
 
 
-# ------------------------------------------------------------- scene files and the demo
-def test_scene_file_movable_bones(tmp_path):
-    from emu.scenefile import SceneFileError, load_scene_file
-
-    base = "[mesh.arm]\nresolution = 1\n[frames]\ncount = 2\n[activation.flexor]\nkeys = [[0.0, 0.0], [1.0, 0.3]]\n"
-    p = tmp_path / "arm.toml"
-    p.write_text(base)
-    spec = load_scene_file(p)
-    assert spec.scene.movable_bones == ["forearm"]
-    p.write_text(base + "[bones.forearm]\nfixed = true\n")
-    assert load_scene_file(p).scene.movable_bones == []
-    p.write_text(base + "[bones.forearm]\nacap_weight = 50.0\n")
-    assert load_scene_file(p).scene.parts["forearm"].acap_weight == 50.0
-    for extra, match in [
-        ("[bones.forearm]\nangle = [[0.0, 10.0]]\naxis = [0, 0, 1]\ncenter = [0, 0, 0]\n", "cannot be scripted"),
-        ("[bones.forearm]\nacap_weight = -1.0\n", "acap_weight must be positive"),
-        ("[bones.forearm]\nfixed = 1\n", "'bones.forearm.fixed' must be bool"),
-        ("[bones.humerus]\nangle = [[0.0, 10.0]]\n", "missing 'axis'"),
-        ("[bones.ulna]\nfixed = false\n", "no bone named 'ulna'"),
-    ]:
-        p.write_text(base + extra)
-        with pytest.raises(SceneFileError, match=match):
-            load_scene_file(p)
-    p.write_text(base.replace("resolution = 1", "resolution = 0"))
-    with pytest.raises(SceneFileError, match="resolution must be >= 1"):
-        load_scene_file(p)
-    p.write_text(base.replace("[mesh.arm]", "[mesh.neck]").replace("flexor", "left_back"))
-    assert load_scene_file(p).scene.movable_bones == ["head"]
-
-
-def test_emu_demo_end_to_end(tmp_path):
-    import json
-    import subprocess
-    import sys
-    import xml.etree.ElementTree as ET
-
-    import meshio
-
-    out = tmp_path / "demo"
-    r = subprocess.run([sys.executable, "-m", "emu.cli", "demo", "--resolution", "1", "--frames", "5",
-                        "--out", str(out)], capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stdout + r.stderr
-    for name in ("contact_sheet.png", "elbow_angle.png"):
-        data = (out / name).read_bytes()
-        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10000
-    files = [d.attrib["file"] for d in ET.parse(out / "series.pvd").getroot().iter("DataSet")]
-    assert len(files) == 5
-    m = meshio.read(out / files[1])  # t = 0.5 s, the flexor's peak: the forearm has turned
-    assert np.abs(m.point_data["displacement"]).max() > 1e-3
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["all_converged"] and summary["frames"] == 5
-    angles = summary["elbow_angle_deg"]
-    assert angles[1] > 10 and abs(angles[2]) < 0.1 and angles[3] < -3, angles  # flexes, back, extends
-    assert summary["max_angle_difference_deg"] < 3.0
-    log = json.loads((out / "log.json").read_text())
-    assert [f["bone_angles_deg"]["forearm"] for f in log["frames"]] == pytest.approx(angles)
-
-
 # ------------------------------------------------------------- declared joints
-def gap_scene():
-    """Two bones that do not touch (a gap at the elbow), an L-shaped muscle
-    between them, and a hinge declared at the corner (axis z)."""
-    pts, tets, lab = emu.meshes.block_mesh(
-        {"upper": [(0, j) for j in range(2, 6)], "lower": [(i, 0) for i in range(2, 6)],
-         "muscle": [(1, j) for j in range(1, 5)] + [(i, 1) for i in range(2, 5)]}, 1)
-    s = emu.Scene(pts, tets)
-    s.add_bone("upper", lab == 0)
-    s.add_bone("lower", lab == 1, fixed=False)
-    s.add_muscle("muscle", lab == 2)
-    return s
-
-
 def test_declared_hinge_between_bones_that_do_not_touch():
     s = gap_scene()
     assert s.joints() == []
@@ -264,7 +193,7 @@ def test_declared_hinge_between_bones_that_do_not_touch():
     assert np.linalg.norm(bm.R @ c + bm.t - c) > 0.05
     s.add_joint("lower", "upper", centre=[1.5, 1.5, 0.5], axis=[0, 0, 1])
     (j,) = s.joints()
-    assert j["declared"] and j["kind"] == "hinge"
+    assert j.declared and j.kind == "hinge"
     angles = {}
     for method, alpha in (("fem", None), ("emu", 100), ("emu", 1000), ("emu", 10000)):
         sol = emu.Solver(s, method, **({"alpha": alpha} if alpha else {})).solve({"muscle": 0.5}, normalized=True)
@@ -294,7 +223,7 @@ def test_declared_joint_errors():
 
 
 def test_big_muscle_free_bone_is_pulled_toward_the_fixed_one():
-    path = SHARED_DATA / "big_muscle" / "big_muscle.vtu"
+    path = shared_path("big_muscle")
     s = emu.io.load_scene(path, free_bones=["bone_2"], warn=False)
     assert s.joints() == []              # no joint: bone_2 is held by the muscle alone
     c1 = s.points[np.unique(s.tets[s.parts["bone_1"].tets])].mean(axis=0)
@@ -314,36 +243,6 @@ def test_big_muscle_free_bone_is_pulled_toward_the_fixed_one():
     # FEM: about 1.5 of the 10.4 units between the centres; EMU within 5% of that
     assert 0.05 * gap < moved["fem"] < 0.5 * gap, moved
     assert abs(moved["emu"] - moved["fem"]) < 0.05 * moved["fem"], moved
-
-
-def test_scene_file_declared_joint(tmp_path):
-    from emu.scenefile import SceneFileError, load_scene_file
-
-    s = gap_scene()
-    mesh = tmp_path / "gap.vtu"
-    part = np.zeros(len(s.tets), np.int32)
-    for i, name in enumerate(("upper", "lower", "muscle")):
-        part[s.parts[name].tets] = i
-    emu.io.write(mesh, s.points, s.tets, cell_data={"part": part})
-    (tmp_path / "scene.json").write_text(
-        '{"parts": [{"id": 0, "name": "upper", "kind": "bone"}, {"id": 1, "name": "lower", "kind": "bone"}, '
-        '{"id": 2, "name": "muscle", "kind": "muscle"}]}')
-    base = ('[mesh]\npath = "gap.vtu"\nfibers = "laplace"\n[bones.lower]\nfixed = false\n'
-            '[joints.elbow]\nbones = ["lower", "upper"]\ncentre = [1.5, 1.5, 0.5]\n')
-    p = tmp_path / "s.toml"
-    p.write_text(base + "axis = [0, 0, 1]\n")
-    spec = load_scene_file(p)
-    (j,) = spec.scene.joints()
-    assert j["kind"] == "hinge" and j["declared"] and j["bones"] == ("lower", "upper")
-    p.write_text(base)
-    assert load_scene_file(p).scene.joints()[0]["kind"] == "ball"
-    for text, match in [(base.replace('"upper"]', '"ulna"]'), "no bone named 'ulna'"),
-                        (base + "axis = [0, 1]\n", "axis must be three numbers"),
-                        (base.replace('centre = [1.5, 1.5, 0.5]\n', ''), "missing 'centre'"),
-                        (base + "angle = 3.0\n", "unknown key 'joints.elbow.angle'")]:
-        p.write_text(text)
-        with pytest.raises(SceneFileError, match=match):
-            load_scene_file(p)
 
 
 # ------------------------------------------------------------- passive joint stiffness
@@ -464,7 +363,7 @@ def test_a_bone_nothing_turns_is_reported_as_a_neutral_mode():
     s.add_bone("base", lab == 0)
     s.add_bone("loose", lab == 1, fixed=False)
     s.add_muscle("m", lab == 2, [1, 0, 0])
-    assert [j["kind"] for j in s.joints()] == ["ball"]
+    assert [j.kind for j in s.joints()] == ["ball"]
     for method in ("fem", "emu"):
         with pytest.warns(emu.NeutralModeWarning, match="bone 'loose' can turn"):
             sol = emu.Solver(s, method).solve({"m": 0.5}, normalized=True)

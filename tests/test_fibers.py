@@ -1,15 +1,11 @@
 """Laplace fibre fields: analytic case, the shared scenes' own fibres, and the errors."""
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import emu
-from conftest import bone_muscle_bone
+from conftest import bone_muscle_bone, shared_path
 from emu.fibers import attachments, fiber_angle_degrees, laplace_fibers
 from emu.meshes import fusiform
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def _bar():
@@ -40,9 +36,7 @@ def test_spindle_fibres_follow_the_generator_meridians():
 
 @pytest.mark.parametrize("scene,bound", [("simple_joint", 0.5), ("big_muscle", 4.0)])
 def test_shared_scene_fibres_are_reproduced(scene, bound):
-    path = DATA / scene / f"{scene}.vtu"
-    if not path.exists():
-        pytest.skip("shared data folder not present")
+    path = shared_path(scene)
     mesh = emu.io.read(path)
     lap = emu.io.load_scene(path, fibers="laplace", warn=False)
     muscle = lap.parts["muscle"]
@@ -61,9 +55,13 @@ def test_scene_resolves_fibres_from_two_bone_attachments():
     s.add_bone("proximal", c < 0.15 * m.length)
     s.add_bone("distal", c > 0.85 * m.length)
     s.add_muscle("belly", (c >= 0.15 * m.length) & (c <= 0.85 * m.length))
-    sol = emu.solve(s, {"belly": 3e4}, "fem")
-    assert sol.converged
-    assert abs(s.parts["belly"].fibers[:, 2]).min() > 0.8
+    solver = emu.Solver(s, "fem")
+    assert solver.solve({"belly": 3e4}).converged
+    belly = s.parts["belly"]
+    assert abs(solver.fibers[belly.tets, 2]).min() > 0.8     # the solve used the Laplace field ...
+    assert belly.fibers is None                               # ... and left the scene alone
+    s.resolve_fibers()                                        # asked for, it is stored
+    np.testing.assert_array_equal(belly.fibers, solver.fibers[belly.tets])
 
 
 def test_muscle_with_one_attachment_needs_user_input():

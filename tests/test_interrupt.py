@@ -9,10 +9,7 @@ import time
 SCRIPT = r"""
 import signal, time, emu
 signal.signal(signal.SIGINT, signal.default_int_handler)
-from emu.meshes import fusiform
-m = fusiform(3)
-s = emu.Scene(m.points, m.tets, warn=False)
-s.add_muscle("belly", ~m.is_tendon, m.fibers[~m.is_tendon]); s.add_tendon("t", m.is_tendon); s.pin(m.proximal)
+s = emu.scenes.fusiform(3, warn=False)
 solver = emu.Solver(s, "emu", step="woodbury", alpha=1e4, max_iterations=10**8, rtol_grad=1e-300,
                     rtol_energy=1e-300)
 print("ready", flush=True)

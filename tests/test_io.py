@@ -98,15 +98,42 @@ def test_write_solution(tmp_path):
     np.testing.assert_allclose(fib[belly], fu / np.linalg.norm(fu, axis=1, keepdims=True), atol=1e-10)
 
 
-def test_write_solution_records_activation(tmp_path):
+def test_write_solution_records_the_activation_it_is_given(tmp_path):
     import meshio
 
     s, m, sol = solved_scene()
     path = tmp_path / "frame.vtu"
-    emu.io.write_solution(path, s, sol)
+    emu.io.write_solution(path, s, sol, activation={"belly": 5e4})
     act = np.asarray(meshio.read(path).cell_data["activation"][0]).ravel()
     np.testing.assert_allclose(act[~m.is_tendon], 5e4)
     np.testing.assert_allclose(act[m.is_tendon], 0.0)
+    per_tet = np.linspace(0.0, 1.0, len(s.tets))
+    emu.io.write_solution(path, s, sol.positions, activation=per_tet)
+    np.testing.assert_allclose(np.asarray(meshio.read(path).cell_data["activation"][0]).ravel(), per_tet)
+    # the writer does not look into the solution for it: without one, no activation field
+    emu.io.write_solution(path, s, sol)
+    assert "activation" not in meshio.read(path).cell_data
+    with pytest.raises(ValueError, match="no muscle named 'tendons'"):
+        emu.io.write_solution(path, s, sol, activation={"tendons": 1.0})
+    with pytest.raises(ValueError, match=r"one value per tet"):
+        emu.io.write_solution(path, s, sol, activation=np.zeros(3))
+
+
+def test_write_solution_fibres_without_changing_the_scene(tmp_path):
+    """A muscle without fibres: the frame shows its Laplace field (as the solver
+    used it), and the scene keeps fibers=None."""
+    import meshio
+
+    s = emu.scenes.arm(1)
+    ref = {n: s.parts[n].fibers.copy() for n in s.muscles}
+    for n in s.muscles:
+        s.parts[n].fibers = None
+    path = tmp_path / "rest.vtu"
+    emu.io.write_solution(path, s, s.points)
+    fib = np.asarray(meshio.read(path).cell_data["fiber"][0])
+    for n in s.muscles:
+        np.testing.assert_allclose(fib[s.parts[n].tets], ref[n], atol=1e-8)
+        assert s.parts[n].fibers is None
 
 
 def test_missing_file(tmp_path):
@@ -132,3 +159,14 @@ def test_unreadable_file(tmp_path):
     path.write_text("this is not a mesh")
     with pytest.raises(ValueError, match="could not read"):
         emu.io.read(path)
+
+
+def test_boundary_surface_is_closed_and_outward():
+    m = emu.meshes.fusiform(3)
+    f = emu.io.boundary_faces(m.tets)
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    assert np.all(counts == 2)  # closed, manifold
+    p = m.points
+    vol = np.einsum("ij,ij->i", p[f[:, 0]], np.cross(p[f[:, 1]], p[f[:, 2]])).sum() / 6.0
+    assert vol == pytest.approx(emu.checks.signed_volumes(p, m.tets).sum(), rel=1e-10)  # outward normals

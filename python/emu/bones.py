@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import bbox_diagonal
+
 __all__ = ["BoneMotion", "rigid_fit", "bone_motion", "signed_angle", "bone_angle"]
 
 
@@ -42,7 +44,7 @@ def bone_motion(scene, positions, bone: str) -> BoneMotion:
     v = np.unique(scene.tets[part.tets].ravel())
     X, Y = scene.points[v], P[v]
     R, t = rigid_fit(X, Y)
-    diag = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0)))
+    diag = bbox_diagonal(X)
     rig = float(np.linalg.norm(X @ R.T + t - Y, axis=1).max() / diag)
     ang = float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
     return BoneMotion(R=R, t=t, angle_deg=ang, rigidity=rig)
@@ -66,6 +68,6 @@ def bone_angle(scene, positions, bone: str) -> float:
     if it has a hinge, else the unsigned rotation angle."""
     bm = bone_motion(scene, positions, bone)
     for j in scene.joints():
-        if bone in j["bones"] and j["kind"] == "hinge":
-            return signed_angle(bm.R, j["axis"])
+        if bone in j.bones and j.kind == "hinge":
+            return signed_angle(bm.R, j.axis)
     return bm.angle_deg

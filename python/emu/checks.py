@@ -1,8 +1,11 @@
-"""Rest-mesh checks: orientation, degenerate and sliver tets, unused vertices.
+"""Input checks: the rest mesh (orientation, degenerate and sliver tets,
+unused vertices) and the scene's connectivity (every piece anchored, no
+welded movable bone).
 
 Real meshes (TetWild, gmsh, the authors' research code) arrive with defects;
 these checks report them, fix what has one right fix (vertex order), and
-refuse what cannot be simulated (NaN, bad indices, zero-volume tets).
+refuse what cannot be simulated (NaN, bad indices, zero-volume tets, pieces
+nothing holds).
 """
 from __future__ import annotations
 
@@ -10,7 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MeshReport", "check_mesh", "tet_quality", "signed_volumes", "connected_components"]
+from .geometry import bbox_diagonal
+
+__all__ = ["MeshReport", "check_mesh", "tet_quality", "signed_volumes", "connected_components",
+           "check_anchored", "check_movable_bones"]
 
 SLIVER_QUALITY = 0.05
 
@@ -92,7 +98,7 @@ def check_mesh(points, tets):
     if len(rep):
         raise ValueError(f"{len(rep)} tet(s) repeat a vertex, e.g. tet {rep[0]} = {tets[rep[0]].tolist()}")
     vol = signed_volumes(points, tets)
-    scale = np.linalg.norm(points.max(0) - points.min(0)) ** 3
+    scale = bbox_diagonal(points) ** 3
     degenerate = np.flatnonzero(np.abs(vol) <= 1e-14 * scale)
     if len(degenerate):
         raise ValueError(f"{len(degenerate)} tet(s) have zero volume (e.g. tet {degenerate[0]}); remove them "
@@ -131,3 +137,63 @@ def connected_components(num_vertices: int, tets: np.ndarray) -> np.ndarray:
         lo, hi = np.minimum(ra[diff], rb[diff]), np.maximum(ra[diff], rb[diff])
         parent[hi] = lo
     return find(np.arange(num_vertices))
+
+
+def check_anchored(num_vertices: int, tets: np.ndarray, pinned: np.ndarray, links=(), anchors=()):
+    """Raise ValueError unless every connected piece of the mesh made of ``tets``
+    holds a pinned vertex.
+
+    num_vertices  number of mesh vertices
+    tets          (k, 4) the tets that carry unknowns (soft tets and movable bones)
+    pinned        (p,) ids of the vertices the solve holds fixed
+    links         (a, b) vertex-id pairs whose pieces count as one (a declared
+                  joint between two movable bones)
+    anchors       vertex ids whose piece counts as anchored (a declared joint to
+                  a fixed bone)
+    """
+    used = np.zeros(num_vertices, bool)
+    used[tets.ravel()] = True
+    pinned = np.asarray(pinned, np.int64)
+    if not np.any(used[pinned]):
+        raise ValueError("the scene is not anchored: pin some vertices (scene.pin) or attach the muscles "
+                         "to a fixed bone; without an anchor no equilibrium is unique")
+    comp = connected_components(num_vertices, tets)
+    merged = {c: c for c in np.unique(comp[used])}
+
+    def root(c):
+        while merged[c] != c:
+            c = merged[c]
+        return c
+    for a, b in links:
+        merged[root(comp[a])] = root(comp[b])
+    lut = np.arange(comp.max() + 1)
+    for c in merged:
+        lut[c] = root(c)
+    comp = lut[comp]
+    anchored = np.unique(np.concatenate([comp[pinned[used[pinned]]],
+                                         comp[np.asarray(list(anchors), dtype=np.int64)]]))
+    loose = np.setdiff1d(np.unique(comp[used]), anchored)
+    if len(loose):
+        size = int(np.sum(comp[used] == loose[0]))
+        raise ValueError(f"{len(loose)} connected piece(s) of the mesh have no pinned vertex (one has "
+                         f"{size} vertices); pin a vertex of every piece")
+
+
+def check_movable_bones(points: np.ndarray, bones: dict, held: np.ndarray):
+    """Raise ValueError if a movable bone is held at three or more non-collinear
+    vertices (a weld: it cannot move).
+
+    points  (n, 3) rest positions
+    bones   {movable bone name: its vertex ids}
+    held    (p,) ids of the vertices the solve holds fixed (pins, fixed bones)
+    """
+    diag = bbox_diagonal(points)
+    for name, verts in bones.items():
+        on = np.intersect1d(verts, held)
+        if len(on) < 3:
+            continue
+        X = points[on] - points[on[0]]
+        if np.linalg.svd(X, compute_uv=False)[1] > 1e-6 * diag:
+            raise ValueError(f"movable bone '{name}' shares {len(on)} non-collinear vertices with pinned "
+                             "vertices or fixed bones, so it cannot move (a weld); make it fixed=True, or "
+                             "let it share one vertex (ball joint) or two (hinge)")

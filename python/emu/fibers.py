@@ -11,7 +11,7 @@ import numpy as np
 
 from . import _core
 
-__all__ = ["laplace_fibers", "attachments", "fiber_angle_degrees"]
+__all__ = ["laplace_fibers", "attachments", "attachment_fibers", "fiber_angle_degrees"]
 
 
 def laplace_fibers(points, tets, origin, insertion) -> np.ndarray:
@@ -53,8 +53,23 @@ def attachments(tets: np.ndarray, muscle_tets: np.ndarray, bones: dict) -> dict:
     return out
 
 
+def attachment_fibers(points, tets, muscle: str, muscle_tets, atts: dict) -> np.ndarray:
+    """Laplace fibres (k, 3) of the muscle ``muscle`` (its k tet ids ``muscle_tets``)
+    from its first bone attachment to its second. points  (n, 3); tets  (m, 4)
+    all tets; atts  {bone name: vertex ids} as from ``attachments``: exactly two
+    (else a ValueError that says what to pass instead)."""
+    if len(atts) != 2:
+        found = ", ".join(f"{k} ({len(v)} vertices)" for k, v in atts.items()) or "none"
+        raise ValueError(f"muscle '{muscle}' has no fibres and {len(atts)} bone attachment(s) ({found}); "
+                         "fibres from attachments need exactly two: pass fibers=, or origin= and "
+                         "insertion= vertex ids")
+    (_, origin), (_, insertion) = atts.items()
+    return laplace_fibers(points, np.asarray(tets)[muscle_tets], origin, insertion)
+
+
 def fiber_angle_degrees(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle between fibre lines (sign-free: a fibre and its reverse are the same), degrees."""
+    """Angle in degrees (k,) between fibre lines a, b (k, 3) (sign-free: a fibre
+    and its reverse are the same)."""
     a = a / np.linalg.norm(a, axis=1, keepdims=True)
     b = b / np.linalg.norm(b, axis=1, keepdims=True)
     return np.degrees(np.arccos(np.clip(np.abs(np.sum(a * b, axis=1)), 0.0, 1.0)))

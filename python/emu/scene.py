@@ -1,13 +1,16 @@
-"""The scene: one tet mesh, its labelled parts, materials and boundary conditions."""
+"""The scene: one tet mesh, its labelled parts, materials and boundary
+conditions (bookkeeping only: joints are found in emu.joints, input checks live
+in emu.checks, and emu.lowering turns a scene into the C++ model)."""
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 
-from . import _core
-from .checks import MeshReport, check_mesh, connected_components
+from .checks import check_anchored, check_mesh, check_movable_bones
+from .fibers import attachment_fibers, attachments, laplace_fibers
+from .joints import declare_joint, detect_joints
+from .parts import BONE_ACAP_WEIGHT, Part, default_tendon_weight, lame
 
 __all__ = ["Scene", "Part", "lame", "MeshWarning"]
 
@@ -16,48 +19,16 @@ class MeshWarning(UserWarning):
     """A defect in the input mesh that emu repaired or that may affect results."""
 
 
-def lame(youngs: float, poisson: float) -> tuple[float, float]:
-    """(mu, lambda) from Young's modulus and Poisson ratio."""
-    if not youngs > 0:
-        raise ValueError(f"Young's modulus must be positive, got {youngs}")
-    if not 0 < poisson < 0.5:
-        raise ValueError(f"Poisson ratio must lie in (0, 0.5), got {poisson}")
-    mu = youngs / (2.0 * (1.0 + poisson))
-    lam = youngs * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson))
-    return mu, lam
-
-
-# ACAP weight of movable bones' tets: the fitted bone positions follow the
-# bone's rotation to about 1/weight of the soft tissue's pull (measured in
-# docs/DESIGN.md); large weights only touch the small dense bone block.
-BONE_ACAP_WEIGHT = 1e4
-
-
-@dataclass
-class Part:
-    name: str
-    kind: str               # "muscle" or "tendon"
-    tets: np.ndarray        # tet ids
-    youngs: float
-    poisson: float
-    density: float
-    acap_weight: float
-    fibers: np.ndarray | None = None   # (len(tets), 3) unit vectors, muscles only
-    max_activation: float = 1e5        # a for normalised activation 1.0
-    fixed: bool = True                 # bones: fixed (or scripted) rather than moved by the muscles
-    joint_stiffness: float = 0.0       # movable bones: passive rotational stiffness (N m / rad)
-
-    @property
-    def mu(self) -> float:
-        return lame(self.youngs, self.poisson)[0]
-
-
 class Scene:
     """A musculoskeletal scene on one conforming tet mesh.
 
     points  (n, 3) rest positions; tets  (m, 4) vertex indices. Negative-volume
     tets are reoriented and slivers reported, both with a MeshWarning; the
     report stays in ``scene.mesh_report``.
+
+    vertex_sets  {name: vertex ids} named vertex sets of a built-in scene (the
+                 fusiform muscle's "proximal" and "distal" end faces), which
+                 scene files can pin by name
     """
 
     def __init__(self, points, tets, *, warn: bool = True):
@@ -70,7 +41,8 @@ class Scene:
         self.pinned = np.zeros(0, np.int64)
         self.pin_targets = np.zeros((0, 3))
         self.gravity = np.zeros(3)
-        self.declared_joints = []   # add_joint: {"bones", "kind", "centre", "axis"}
+        self.declared_joints = []   # Joint(declared=True) from add_joint
+        self.vertex_sets: dict[str, np.ndarray] = {}
 
     # ----------------------------------------------------------------- parts
     def _tet_ids(self, name, tets) -> np.ndarray:
@@ -122,7 +94,6 @@ class Scene:
                 raise ValueError(f"muscle '{name}': give both origin and insertion vertex ids, or neither")
             f = None
             if origin is not None:
-                from .fibers import laplace_fibers
                 try:
                     f = laplace_fibers(self.points, self.tets[idx], origin, insertion)
                 except ValueError as e:
@@ -183,55 +154,27 @@ class Scene:
 
     def attachments(self, muscle: str) -> dict:
         """{bone name: vertex ids} where the muscle shares vertices with a bone."""
-        from .fibers import attachments
-
         p = self._part(muscle, "muscle")
-        return attachments(self.tets, p.tets, {b.name: b.tets for b in self.parts.values() if b.kind == "bone"})
+        return attachments(self.tets, p.tets, self._bones())
+
+    def _bones(self) -> dict:
+        """{bone name: tet ids} in the scene's order."""
+        return {p.name: p.tets for p in self.parts.values() if p.kind == "bone"}
 
     def joints(self) -> list:
-        """Joints detected from vertices shared by two bones: one shared vertex is
-        a ball joint (``centre``), two or more on one line a hinge (``axis``
-        through ``centre``), more not on a line a rigid weld. Returns dicts with
-        bones, kind, vertices, centre, axis."""
-        bones = [p for p in self.parts.values() if p.kind == "bone"]
-        verts = {b.name: np.unique(self.tets[b.tets].ravel()) for b in bones}
-        out = []
-        for i, a in enumerate(bones):
-            for b in bones[i + 1:]:
-                shared = np.intersect1d(verts[a.name], verts[b.name])
-                if len(shared) == 0:
-                    continue
-                p = self.points[shared]
-                kind, axis = _joint_kind(p, self.points)
-                out.append({"bones": (a.name, b.name), "kind": kind, "vertices": shared,
-                            "centre": p.mean(axis=0), "axis": axis, "declared": False})
-        for j in self.declared_joints:
-            out.append(dict(j, vertices=np.zeros(0, np.int64), declared=True))
-        return out
+        """Joints (emu.joints.Joint) between bones: detected from vertices shared
+        by two bones (one shared vertex is a ball joint at ``centre``, two or more
+        on one line a hinge with ``axis`` through ``centre``, more not on a line a
+        rigid weld), then the declared ones (add_joint)."""
+        return detect_joints(self.points, self.tets, self._bones()) + list(self.declared_joints)
 
-    def add_joint(self, bone: str, other: str, centre, axis=None) -> dict:
+    def add_joint(self, bone: str, other: str, centre, axis=None):
         """Declare a joint between two bones that share no vertex there (meshes
-        whose bones do not touch): a ball joint at ``centre``, or with ``axis`` a
-        hinge about the line through ``centre``. At least one of the bones must
-        be movable (fixed=False); the other may be fixed or scripted."""
-        for name in (bone, other):
-            p = self.parts.get(name)
-            if p is None or p.kind != "bone":
-                known = [q.name for q in self.parts.values() if q.kind == "bone"]
-                raise ValueError(f"add_joint: no bone named {name!r} (bones: {', '.join(known) or 'none'}); "
-                                 "add the bones first")
-        if bone == other:
-            raise ValueError(f"add_joint: a joint needs two different bones, got {bone!r} twice")
-        c = np.asarray(centre, dtype=np.float64)
-        if c.shape != (3,) or not np.all(np.isfinite(c)):
-            raise ValueError(f"add_joint: centre must be a finite 3-vector, got {centre!r}")
-        a = None
-        if axis is not None:
-            a = np.asarray(axis, dtype=np.float64)
-            if a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) == 0:
-                raise ValueError(f"add_joint: axis must be a non-zero finite 3-vector, got {axis!r}")
-            a = a / np.linalg.norm(a)
-        j = {"bones": (bone, other), "kind": "ball" if a is None else "hinge", "centre": c, "axis": a}
+        whose bones do not touch): a ball joint at ``centre`` (3,), or with
+        ``axis`` (3,) a hinge about the line through ``centre``. At least one of
+        the bones must be movable (fixed=False); the other may be fixed or
+        scripted. Returns the Joint."""
+        j = declare_joint(self._bones(), bone, other, centre, axis)
         self.declared_joints.append(j)
         return j
 
@@ -248,7 +191,7 @@ class Scene:
                              "measure from; label the tendon tets yourself (add_tendon)")
         if p.fibers is None and len(att) == 2:
             # fibres run between the bone attachments, which the split hides behind the tendons
-            self._fibers_between(p, att)
+            p.fibers = attachment_fibers(self.points, self.tets, p.name, p.tets, att)
         anchor = self.points[np.unique(np.concatenate(list(att.values())))]
         c = self.points[self.tets[p.tets]].mean(axis=1)
         near = np.zeros(len(c), bool)
@@ -332,26 +275,17 @@ class Scene:
         return ids, pos
 
     def resolve_fibers(self):
-        """Give every muscle without fibres a Laplace field between its two bone attachments."""
+        """Give every muscle without fibres a Laplace field between its two bone
+        attachments, stored in its part (emu.lowering computes the same fields for
+        the model without storing them)."""
         for p in self.parts.values():
-            if p.kind != "muscle" or p.fibers is not None:
-                continue
-            att = self.attachments(p.name)
-            if len(att) != 2:
-                found = ", ".join(f"{k} ({len(v)} vertices)" for k, v in att.items()) or "none"
-                raise ValueError(f"muscle '{p.name}' has no fibres and {len(att)} bone attachment(s) ({found}); "
-                                 "fibres from attachments need exactly two: pass fibers=, or origin= and "
-                                 "insertion= vertex ids")
-            self._fibers_between(p, att)
-
-    def _fibers_between(self, part: Part, att: dict):
-        """Laplace fibres of a muscle from its first attachment to its second."""
-        from .fibers import laplace_fibers
-
-        (_, origin), (_, insertion) = att.items()
-        part.fibers = laplace_fibers(self.points, self.tets[part.tets], origin, insertion)
+            if p.kind == "muscle" and p.fibers is None:
+                p.fibers = attachment_fibers(self.points, self.tets, p.name, p.tets, self.attachments(p.name))
 
     def validate(self):
+        """Raise ValueError (with the fix) unless the scene can be solved: parts
+        cover every tet, something soft to simulate, every piece anchored, no
+        welded movable bone, a finite gravity."""
         if not self.parts:
             raise ValueError("the scene has no parts: add_muscle/add_tendon first")
         free = np.flatnonzero(self._owner < 0)
@@ -359,62 +293,24 @@ class Scene:
             raise ValueError(f"{len(free)} tet(s) belong to no part (e.g. tet {free[0]}); add them to a "
                              "muscle, tendon or bone")
         soft = self.model_tets
-        movable = [p for p in self.parts.values() if p.kind == "bone" and not p.fixed]
-        if len(soft) == sum(len(p.tets) for p in movable):
-            raise ValueError("the scene has no muscle or tendon tets: nothing to simulate")
-        used = np.zeros(len(self.points), bool)
-        used[self.tets[soft].ravel()] = True
-        pins, _ = self.model_pins()
-        if not np.any(used[pins]):
-            raise ValueError("the scene is not anchored: pin some vertices (scene.pin) or attach the muscles "
-                             "to a fixed bone; without an anchor no equilibrium is unique")
-        comp = connected_components(len(self.points), self.tets[soft])
-        # declared joints connect their bones' pieces (or anchor them, to a fixed bone)
         movable = set(self.movable_bones)
-        piece = {p.name: comp[self.tets[p.tets[0], 0]] for p in self.parts.values()
-                 if p.kind == "bone" and p.name in movable}
-        merged = {c: c for c in np.unique(comp[used])}
-
-        def root(c):
-            while merged[c] != c:
-                c = merged[c]
-            return c
-        extra_anchored = []
+        if len(soft) == sum(len(self.parts[n].tets) for n in movable):
+            raise ValueError("the scene has no muscle or tendon tets: nothing to simulate")
+        pins, _ = self.model_pins()
+        # declared joints connect their bones' pieces (or anchor them, to a fixed bone)
+        piece = {n: self.tets[self.parts[n].tets[0], 0] for n in movable}   # a vertex of each movable bone
+        links, anchors = [], []
         for j in self.declared_joints:
-            a, b = j["bones"]
+            a, b = j.bones
             if a in piece and b in piece:
-                merged[root(piece[a])] = root(piece[b])
+                links.append((piece[a], piece[b]))
             elif a in piece or b in piece:
-                extra_anchored.append(piece[a] if a in piece else piece[b])
-        lut = np.arange(comp.max() + 1)
-        for c in merged:
-            lut[c] = root(c)
-        comp = lut[comp]
-        anchored = np.unique(np.concatenate([comp[pins[used[pins]]],
-                                             np.array([root(c) for c in extra_anchored], dtype=comp.dtype)]))
-        loose = np.setdiff1d(np.unique(comp[used]), anchored)
-        if len(loose):
-            size = int(np.sum(comp[used] == loose[0]))
-            raise ValueError(f"{len(loose)} connected piece(s) of the mesh have no pinned vertex (one has "
-                             f"{size} vertices); pin a vertex of every piece")
-        self._check_movable_bones(pins)
+                anchors.append(piece[a] if a in piece else piece[b])
+        check_anchored(len(self.points), self.tets[soft], pins, links, anchors)
+        check_movable_bones(self.points, {n: np.unique(self.tets[self.parts[n].tets].ravel())
+                                          for n in self.movable_bones}, pins)
         if not np.all(np.isfinite(self.gravity)) or np.shape(self.gravity) != (3,):
             raise ValueError(f"gravity must be a finite 3-vector, got {self.gravity!r}")
-
-    def _check_movable_bones(self, pins):
-        """A movable bone held at three or more non-collinear vertices cannot move."""
-        diag = float(np.linalg.norm(self.points.max(0) - self.points.min(0)))
-        for p in self.parts.values():
-            if p.kind != "bone" or p.fixed:
-                continue
-            held = np.intersect1d(np.unique(self.tets[p.tets].ravel()), pins)
-            if len(held) < 3:
-                continue
-            X = self.points[held] - self.points[held[0]]
-            if np.linalg.svd(X, compute_uv=False)[1] > 1e-6 * diag:
-                raise ValueError(f"movable bone '{p.name}' shares {len(held)} non-collinear vertices with pinned "
-                                 "vertices or fixed bones, so it cannot move (a weld); make it fixed=True, or "
-                                 "let it share one vertex (ball joint) or two (hinge)")
 
     def acap_weight_of(self, part: Part) -> float:
         """The ACAP weight of a part (tendons without an explicit weight: default_tendon_weight)."""
@@ -422,99 +318,6 @@ class Scene:
             return part.acap_weight
         return default_tendon_weight(part.mu / self.reference_shear_modulus())
 
-    def build_model(self) -> "_core.Model":
-        """The flat arrays the C++ solvers take (tets of fixed bones left out)."""
-        self.validate()
-        self.resolve_fibers()
-        keep = self.model_tets
-        m = len(self.tets)
-        mu, lam, rho, w = (np.empty(m) for _ in range(4))
-        fib = np.zeros((m, 3))
-        muscle = np.full(m, -1, np.int32)
-        bone = np.full(m, -1, np.int32)
-        names = self.muscles
-        movable = self.movable_bones
-        for p in self.parts.values():
-            if p.kind == "bone" and not p.fixed:
-                bone[p.tets] = movable.index(p.name)
-            pm, pl = lame(p.youngs, p.poisson)
-            mu[p.tets], lam[p.tets], rho[p.tets] = pm, pl, p.density
-            w[p.tets] = self.acap_weight_of(p)
-            if p.kind == "muscle":
-                fib[p.tets] = p.fibers
-                muscle[p.tets] = names.index(p.name)
-        model = _core.Model()
-        model.rest = self.points
-        model.tets = self.tets[keep].astype(np.int32)
-        model.mu, model.lam, model.density, model.acap_weight = mu[keep], lam[keep], rho[keep], w[keep]
-        model.fiber = fib[keep]
-        model.muscle = muscle[keep]
-        model.pinned = self.model_pins()[0].astype(np.int32)
-        model.num_muscles = len(names)
-        if movable:
-            model.bone = bone[keep]
-            model.num_bones = len(movable)
-            k = np.array([self.parts[n].joint_stiffness for n in movable], float)
-            if np.any(k > 0):
-                model.bone_stiffness = k
-        pts, pairs = self._declared_joint_rows()
-        if len(pts):
-            model.joint_points = pts
-            model.joint_bones = pairs.astype(np.int32)
-        return model
-
-    def _declared_joint_rows(self):
-        """Rest points (#rows, 3) and (movable bone, other movable bone or -1) of
-        the declared joints: one row per ball joint, two per hinge."""
-        movable = self.movable_bones
-        diag = float(np.linalg.norm(self.points.max(0) - self.points.min(0)))
-        pts, pairs = [], []
-        for j in self.declared_joints:
-            a, b = j["bones"]
-            if a not in movable:
-                a, b = b, a
-            if a not in movable:
-                raise ValueError(f"joint {j['bones']}: both bones are fixed; make one of them movable "
-                                 "(fixed=False) or drop the joint")
-            ib = movable.index(b) if b in movable else -1
-            rows = [j["centre"]] if j["axis"] is None else [j["centre"] - 0.1 * diag * j["axis"],
-                                                           j["centre"] + 0.1 * diag * j["axis"]]
-            for p in rows:
-                pts.append(p)
-                pairs.append((movable.index(a), ib))
-        return np.asarray(pts, float).reshape(-1, 3), np.asarray(pairs, np.int64).reshape(-1, 2)
-
-    def declared_joint_world(self):
-        """(row, world bone name) of every declared-joint row tied to a fixed bone."""
-        movable = self.movable_bones
-        out, row = [], 0
-        for j in self.declared_joints:
-            a, b = j["bones"]
-            if a not in movable:
-                a, b = b, a
-            n = 1 if j["axis"] is None else 2
-            if b not in movable:
-                out += [(row + i, b) for i in range(n)]
-            row += n
-        return out
-
     def __repr__(self):
         parts = ", ".join(f"{p.name} ({p.kind}, {len(p.tets)} tets)" for p in self.parts.values())
         return f"Scene({len(self.points)} vertices, {len(self.tets)} tets; {parts}; {len(self.pinned)} pinned)"
-
-
-def _joint_kind(p: np.ndarray, all_points: np.ndarray) -> tuple:
-    """("ball" | "hinge" | "weld", unit axis or None) of shared joint vertices p."""
-    diag = float(np.linalg.norm(all_points.max(0) - all_points.min(0)))
-    if len(p) == 1:
-        return "ball", None
-    c = p - p.mean(axis=0)
-    _, sv, vt = np.linalg.svd(c, full_matrices=False)
-    if len(sv) > 1 and sv[1] > 1e-6 * diag:
-        return "weld", None
-    return "hinge", vt[0] * (1.0 if vt[0][np.argmax(np.abs(vt[0]))] > 0 else -1.0)
-
-
-def default_tendon_weight(stiffness_ratio: float) -> float:
-    """ACAP weight for a part `stiffness_ratio` times stiffer than the muscles."""
-    return float(min(max(stiffness_ratio, 1.0), 1e3) ** 0.5)

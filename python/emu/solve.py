@@ -8,9 +8,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
+from .geometry import bbox_diagonal
+from .lowering import build_model, declared_joint_rows, declared_joint_world
+from .poses import parse_pose
+from .runtime import set_threads
 from .scene import Scene
 
-__all__ = ["Solver", "Solution", "solve", "rotation", "pose_about", "METHODS", "STEPS", "NeutralModeWarning"]
+__all__ = ["Solver", "Solution", "solve", "METHODS", "STEPS", "NeutralModeWarning"]
 
 
 class NeutralModeWarning(UserWarning):
@@ -88,6 +92,9 @@ class Solver:
     bone_coarse_space  EMU with movable bones: add a coarse correction for the bones'
                   rotations to the preconditioner (fewer CG iterations; docs/DESIGN.md)
     threads       OpenMP and OpenBLAS threads (None: leave as is)
+
+    fibers        (m, 3) the rest fibre direction per tet of the scene the model
+                  was built with (emu.lowering.tet_fibers); the scene is not changed
     """
 
     def __init__(self, scene: Scene, method: str = "emu", *, alpha: float = 100.0, modes: int = 24,
@@ -105,11 +112,11 @@ class Solver:
         if int(modes) < 0:
             raise ValueError(f"modes must be >= 0, got {modes}")
         if threads is not None:
-            if int(threads) < 1:
-                raise ValueError(f"threads must be >= 1, got {threads}")
-            _core.set_threads(int(threads))
+            set_threads(threads)
         self.scene, self.method, self.step = scene, method, step
-        self.model = scene.build_model()
+        self.model = build_model(scene)
+        self.fibers = np.zeros((len(scene.tets), 3))
+        self.fibers[scene.model_tets] = np.asarray(self.model.fiber)  # muscles always carry unknowns
         self._model_tets = scene.model_tets
         opts = _core.SolverOptions()
         opts.rtol_grad, opts.rtol_energy = float(rtol_grad), float(rtol_energy)
@@ -173,7 +180,7 @@ class Solver:
             if not bones[name].fixed:
                 raise ValueError(f"bone_poses: bone '{name}' is moved by the muscles (fixed=False); only fixed "
                                  "bones can be scripted")
-            poses[name] = _pose(name, pose)
+            poses[name] = parse_pose(name, pose)
 
         def placed(name, X):  # where bone `name` puts rest points X
             if name not in poses:
@@ -186,15 +193,15 @@ class Solver:
             verts = np.unique(self.scene.tets[bones[name].tets].ravel())
             targets[np.searchsorted(ids, verts)] = placed(name, self.scene.points[verts])
         # a vertex shared by two bones (a joint) must land in the same place under both poses
-        diag = float(np.linalg.norm(self.scene.points.max(0) - self.scene.points.min(0)))
+        diag = bbox_diagonal(self.scene.points)
         for joint in self.scene.joints():
-            a, b = joint["bones"]
-            if not (bones[a].fixed and bones[b].fixed):
+            a, b = joint.bones
+            if joint.declared or not (bones[a].fixed and bones[b].fixed):
                 continue  # a movable bone follows its joint by itself
-            X = self.scene.points[joint["vertices"]]
+            X = self.scene.points[joint.vertices]
             gap = np.linalg.norm(placed(a, X) - placed(b, X), axis=1)
             if gap.max() > 1e-9 * diag:
-                v = joint["vertices"][int(np.argmax(gap))]
+                v = joint.vertices[int(np.argmax(gap))]
                 raise ValueError(f"bones '{a}' and '{b}' share vertex {v}, which their poses put "
                                  f"{gap.max():.3g} apart; a joint must stay together "
                                  "(rotate about the joint: the hinge axis or ball centre)")
@@ -220,13 +227,13 @@ class Solver:
             targets = targets.copy()
             targets[np.searchsorted(ids, self.scene.pinned)] = pins
         load.pin_positions = targets
-        world = self.scene.declared_joint_world()
+        world = declared_joint_world(self.scene)
         if world and bone_poses:
-            pts, _ = self.scene._declared_joint_rows()
+            pts, _ = declared_joint_rows(self.scene)
             jt = pts.copy()
             for row, bone in world:
                 if bone in bone_poses:
-                    R, t = _pose(bone, bone_poses[bone])
+                    R, t = parse_pose(bone, bone_poses[bone])
                     jt[row] = R @ pts[row] + t
             load.joint_targets = jt
         return load
@@ -295,38 +302,3 @@ def solve(scene: Scene, activation=None, method: str = "emu", *, normalized: boo
     """Build a Solver for ``scene`` and solve once. options: see Solver."""
     return Solver(scene, method, **options).solve(activation, normalized=normalized, gravity=gravity,
                                                   bone_poses=bone_poses, initial=initial)
-
-
-def _pose(name, pose):
-    """(R, t) from (R, t) or a 4x4 matrix; R must be a proper rotation."""
-    if isinstance(pose, (tuple, list)) and len(pose) == 2:
-        R, t = (np.asarray(p, dtype=np.float64) for p in pose)
-    else:
-        M = np.asarray(pose, dtype=np.float64)
-        if M.shape != (4, 4):
-            raise ValueError(f"pose of bone '{name}' must be (R, t) or a 4x4 matrix, got shape {M.shape}")
-        R, t = M[:3, :3], M[:3, 3]
-    if R.shape != (3, 3) or t.shape != (3,) or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-        raise ValueError(f"pose of bone '{name}': R must be a finite 3x3 and t a finite 3-vector")
-    if np.abs(R.T @ R - np.eye(3)).max() > 1e-9 or np.linalg.det(R) < 0:
-        raise ValueError(f"pose of bone '{name}': R is not a rotation (R^T R != I or det R < 0)")
-    return R, t
-
-
-def rotation(axis, degrees) -> np.ndarray:
-    """The rotation matrix about a unit axis by an angle in degrees (Rodrigues)."""
-    k = np.asarray(axis, dtype=np.float64)
-    n = np.linalg.norm(k)
-    if not n > 0:
-        raise ValueError("rotation axis must be non-zero")
-    k = k / n
-    a = np.radians(degrees)
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * (K @ K)
-
-
-def pose_about(axis, degrees, center) -> tuple:
-    """(R, t) rotating by ``degrees`` about ``axis`` through ``center``: x = R (X - c) + c."""
-    R = rotation(axis, degrees)
-    c = np.asarray(center, dtype=np.float64)
-    return R, c - R @ c

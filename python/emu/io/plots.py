@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .surface import boundary_faces
+from .obj import boundary_faces
 
 __all__ = ["contact_sheet", "angle_activation_plot"]
 

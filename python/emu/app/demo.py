@@ -15,16 +15,21 @@ import time
 
 import numpy as np
 
+from ..activation import Curve
+from ..bones import bone_angle
+from ..geometry import vertex_error
+from ..io.plots import angle_activation_plot, contact_sheet
+from ..scenes import arm
+from ..solve import Solver
+from .run import run_scene
+from .scenefile import SceneSpec
+
 __all__ = ["demo_spec", "run_demo"]
 
 
 def demo_spec(resolution: int = 3, frames: int = 25, alpha: float = 100.0):
     """The demo scene as a SceneSpec: 2 s, flexor up to 0.45 and back in the
     first second, extensor up to 1.0 and back in the second."""
-    from .activation import Curve
-    from .scenefile import SceneSpec
-    from .scenes import arm
-
     scene = arm(resolution)
     dt = 2.0 / (frames - 1)
     curves = {"flexor": Curve(keys=[[0.0, 0.0], [0.5, 0.45], [1.0, 0.0]], interpolation="smooth"),
@@ -35,10 +40,7 @@ def demo_spec(resolution: int = 3, frames: int = 25, alpha: float = 100.0):
 
 def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float = 100.0, compare_fem: bool = True,
              progress=print) -> dict:
-    import emu
-    from .plots import angle_activation_plot, contact_sheet
-    from .run import run_scene
-
+    """Run the demo into ``out`` (see the module docstring); returns summary.json's contents."""
     spec = demo_spec(resolution, frames, alpha)
     scene = spec.scene
     os.makedirs(out, exist_ok=True)
@@ -59,15 +61,15 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float = 100
     reference = None
     if compare_fem and done:
         progress("FEM reference for every frame (for EMU's error):")
-        fem = emu.Solver(scene, "fem")
+        fem = Solver(scene, "fem")
         prev, fem_angle, errors, fem_s = None, [], [], 0.0
         t0 = time.perf_counter()
         for k in done:
             sol = fem.solve(spec.activation(k), initial=prev)
             prev = sol
             fem_s += sol.time_s
-            fem_angle.append(emu.bones.bone_angle(scene, sol.positions, "forearm"))
-            errors.append(emu.vertex_error(kept[k], sol))
+            fem_angle.append(bone_angle(scene, sol.positions, "forearm"))
+            errors.append(vertex_error(kept[k], sol))
         fem_angle = np.array(fem_angle)
         reference = {"FEM": fem_angle}
         summary.update(fem_solve_s=fem_s, fem_elbow_angle_deg=fem_angle.tolist(),

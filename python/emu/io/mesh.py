@@ -14,7 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["TetMesh", "read", "write", "write_solution", "load_scene"]
+from ..scene import Scene
+
+__all__ = ["TetMesh", "read", "write", "load_scene"]
 
 _PART_KEYS = ("part", "gmsh:physical", "medit:ref")
 
@@ -86,33 +88,6 @@ def write(path, points, tets, *, cell_data: dict | None = None, point_data: dict
                               point_data=pd or None, cell_data=cd or None, file_format=fmt)
 
 
-def write_solution(path, scene, solution):
-    """A solved frame as a mesh: deformed points; point data displacement; cell
-    data part (index in scene.parts), fiber (deformed, unit), activation, J."""
-    from .checks import signed_volumes
-
-    x = solution.positions
-    part = np.full(len(scene.tets), -1, np.int32)
-    fib = np.zeros((len(scene.tets), 3))
-    act = np.zeros(len(scene.tets))
-    for i, p in enumerate(scene.parts.values()):
-        part[p.tets] = i
-        if p.fibers is not None:
-            fib[p.tets] = p.fibers
-    a = solution.settings.get("activation", {})
-    for name, v in a.items():
-        act[scene.parts[name].tets] = v
-    # deformed fibre direction F u, from the positions (both methods)
-    from ._fields import deformation_gradients
-    F = deformation_gradients(scene.points, scene.tets, x)
-    fu = np.einsum("tij,tj->ti", F, fib)
-    n = np.linalg.norm(fu, axis=1, keepdims=True)
-    fu = np.divide(fu, n, out=np.zeros_like(fu), where=n > 0)
-    J = signed_volumes(x, scene.tets) / signed_volumes(scene.points, scene.tets)
-    write(path, x, scene.tets, cell_data={"part": part, "fiber": fu, "activation": act, "J": J},
-          point_data={"displacement": x - scene.points})
-
-
 def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_bones=(), warn=True,
                fibers="file"):
     """A Scene from a labelled tet mesh (the shared scenes, or any mesh with a
@@ -122,8 +97,6 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_
     bones: fixed, except those named in free_bones, which the muscles move."""
     if fibers not in ("file", "laplace"):
         raise ValueError(f"fibers must be 'file' or 'laplace', got {fibers!r}")
-    from .scene import Scene
-
     mesh = read(path)
     part = mesh.part
     if part is None:

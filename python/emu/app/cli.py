@@ -1,0 +1,228 @@
+"""The ``emu`` command line.
+
+    emu demo [--out DIR] [--resolution R] [--frames N] [--alpha A] [--no-fem] [--threads T]
+    emu compare [--out DIR] [--tets N] [--threads T] [--woodbury]
+    emu solve MESH --activation NAME=A [NAME=A ...] [--free-bones BONE ...] [--method emu|fem] [--out FILE.vtu]
+    emu run SCENE.toml [--out DIR]
+    emu info [MESH]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import warnings
+
+import numpy as np
+
+from ..geometry import vertex_error
+from ..io.mesh import load_scene
+from ..io.vtk import write_solution
+from ..runtime import info as runtime_info
+from ..runtime import set_threads
+from ..scenes import fusiform
+from ..solve import Solver
+from .demo import run_demo
+from .run import run_scene
+from .scenefile import load_scene_file
+
+
+def _print_info(args):
+    i = runtime_info()
+    print(f"emu {i['version']}")
+    print(f"BLAS: {i['config']}")
+    print(f"      {i['library']}, {i['blas_threads']} thread(s); OpenMP: {i['omp_threads']} thread(s)")
+    if args.mesh:
+        spec = None
+        if args.mesh.endswith((".toml", ".json")):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                spec = load_scene_file(args.mesh)
+            scene = spec.scene
+        else:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                scene = load_scene(args.mesh, warn=False)
+        print(scene)
+        for line in scene.mesh_report.lines():
+            print("  " + line)
+        for p in scene.parts.values():
+            print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}")
+            if p.kind == "muscle":
+                att = scene.attachments(p.name)
+                desc = ", ".join(f"{b} ({len(v)} vertices)" for b, v in att.items()) or "none (pins only)"
+                print(f"    attachments: {desc}")
+        bones = [p.name for p in scene.parts.values() if p.kind == "bone"]
+        if bones:
+            scripted = set(spec.bones) if spec is not None else set()
+            movable = set(scene.movable_bones)
+            desc = ", ".join(f"{b} ({'moved by the muscles' if b in movable else 'scripted' if b in scripted else 'fixed'})"
+                             for b in bones)
+            print(f"  bones: {desc}")
+            for j in scene.joints():
+                where = "a declared point" if j.declared else \
+                    f"vertices {j.vertices.tolist()}" if len(j.vertices) <= 4 else f"{len(j.vertices)} vertices"
+                extra = f", axis {np.round(j.axis, 6).tolist()}" if j.axis is not None else ""
+                print(f"  joint {j.bones[0]} - {j.bones[1]}: {j.kind} at {where}, "
+                      f"centre {np.round(j.centre, 6).tolist()}{extra}")
+        if spec is not None:
+            print(f"  frames: {spec.frames} x {spec.dt:g} s; solver: {spec.solver or 'defaults'}")
+            for name, curve in spec.curves.items():
+                kind = "per frame" if curve.per_frame is not None else f"{len(curve.keys)} keys, {curve.interpolation}"
+                print(f"  activation {name}: {kind}, {'normalised' if curve.normalized else 'absolute'}")
+        ids, _ = scene.model_pins()
+        print(f"  fixed vertices (pins, fixed bones): {len(ids)}")
+        m, n = len(scene.model_tets), len(scene.points)
+        print(f"  memory estimate: FEM ~{(m * 144 * 8 + n * 3 * 60 * 8) / 2**20:.0f} MiB, "
+              f"EMU ~{(m * 9 * 8 * 12 + m * 81 * 8 * 2) / 2**20:.0f} MiB plus the factor")
+    return 0
+
+
+def _demo(args):
+    if args.threads:
+        set_threads(args.threads)
+    if args.resolution < 1 or args.frames < 2:
+        raise ValueError("--resolution must be >= 1 and --frames >= 2")
+    summary = run_demo(args.out, resolution=args.resolution, frames=args.frames, alpha=args.alpha,
+                       compare_fem=not args.no_fem)
+    return 0 if summary["all_converged"] else 1
+
+
+def _compare(args):
+    if args.threads:
+        set_threads(args.threads)
+    os.makedirs(args.out, exist_ok=True)
+    scene = fusiform(tets=args.tets, pins=("proximal",))
+    act = {"belly": args.activation}
+    info = runtime_info()
+    print(f"emu compare: fusiform muscle, {len(scene.tets)} tets ({len(scene.parts['belly'].tets)} muscle, "
+          f"{len(scene.parts['tendons'].tets)} tendon), {len(scene.points)} vertices, proximal end pinned")
+    print(f"activation a = {args.activation:g} on the belly; threads {info['omp_threads']}; BLAS {info['config']}")
+    runs = [("fem", {})]
+    runs.append(("emu", dict(alpha=args.alpha, step="newton-krylov")))
+    if args.woodbury:
+        runs.append(("emu", dict(alpha=args.alpha, step="woodbury", max_iterations=3000)))
+    sols = []
+    for method, kw in runs:
+        t0 = time.perf_counter()
+        solver = Solver(scene, method, **kw)
+        sol = solver.solve(act)
+        sols.append(sol)
+        path = os.path.join(args.out, f"{sol.label}.vtu")
+        write_solution(path, scene, sol, activation=act, fibers=solver.fibers)
+        print(f"  {sol.summary()}  [{time.perf_counter() - t0:.2f} s wall] -> {path}", flush=True)
+    fem = sols[0]
+    summary = {"tets": len(scene.tets), "vertices": len(scene.points), "threads": info["omp_threads"],
+               "blas": info["config"], "activation": args.activation, "alpha": args.alpha, "results": {}}
+    tip = scene.vertex_sets["distal"]
+    length0 = float(np.mean(scene.points[tip, 2]))   # the distal end face lies at z = length
+    for sol in sols:
+        err = vertex_error(sol, fem)
+        shortening = 1.0 - float(np.mean(sol.positions[tip, 2])) / length0
+        summary["results"][sol.label] = dict(converged=sol.converged, iterations=sol.iterations,
+                                             cg_iterations=sol.cg_iterations, solve_s=sol.time_s,
+                                             setup_s=sol.setup_time_s, vertex_error_to_fem=err,
+                                             shortening=shortening)
+        if sol is not fem:
+            print(f"  {sol.label}: vertex error to FEM = {err:.2e} of the bounding-box diagonal "
+                  f"(alpha = {args.alpha:g} mu)")
+    print(f"  the muscle shortened by {100 * summary['results']['fem']['shortening']:.1f}% (FEM)")
+    with open(os.path.join(args.out, "summary.json"), "w") as f:
+        json.dump(summary, f, indent=2)
+    print(f"wrote {args.out}/*.vtu (open in ParaView; cell data part, fiber, activation, J; point data "
+          f"displacement) and summary.json")
+    return 0 if all(s.converged for s in sols if s.settings.get("step") != "woodbury") else 1
+
+
+def _parse_activation(items):
+    act = {}
+    for it in items or []:
+        if "=" not in it:
+            raise SystemExit(f"--activation expects NAME=VALUE, got {it!r}")
+        k, v = it.split("=", 1)
+        try:
+            act[k] = float(v)
+        except ValueError:
+            raise SystemExit(f"--activation {k}: {v!r} is not a number") from None
+    return act
+
+
+def _solve(args):
+    if args.threads:
+        set_threads(args.threads)
+    scene = load_scene(args.mesh, free_bones=args.free_bones or ())
+    print(scene)
+    act = _parse_activation(args.activation)
+    kw = dict(alpha=args.alpha, step=args.step) if args.method == "emu" else {}
+    solver = Solver(scene, args.method, **kw)
+    sol = solver.solve(act)
+    print(sol.summary())
+    if args.out:
+        write_solution(args.out, scene, sol, activation=act, fibers=solver.fibers)
+        print(f"wrote {args.out}")
+    return 0 if sol.converged else 1
+
+
+def _run(args):
+    spec = load_scene_file(args.scene)
+    if args.threads:
+        spec.solver["threads"] = args.threads
+    log = run_scene(spec, args.out)
+    print(f"wrote {args.out or spec.output['dir']}: frame_*.vtu + series.pvd (ParaView), frame_*.obj (Blender), "
+          "log.json")
+    if log["interrupted"]:
+        return 130
+    return 0 if all(f["converged"] for f in log["frames"]) else 1
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="emu", description="EMU muscle simulation (and its FEM reference)")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    d = sub.add_parser("demo", help="the built-in arm: a flexor then an extensor swing the forearm about the "
+                                    "elbow; frames, PNG contact sheet, angle plot, EMU vs FEM")
+    d.add_argument("--out", default="emu_out", help="output folder (default: emu_out)")
+    d.add_argument("--resolution", type=int, default=3, help="cells per arm block (default 3: 6.2k tets)")
+    d.add_argument("--frames", type=int, default=25, help="frames over the 2 s sequence (default 25)")
+    d.add_argument("--alpha", type=float, default=100.0, help="EMU alpha relative to the muscles' shear modulus")
+    d.add_argument("--no-fem", action="store_true", help="skip the FEM reference solves")
+    d.add_argument("--threads", type=int, default=None)
+    d.set_defaults(func=_demo)
+    d = sub.add_parser("compare", help="contract a fusiform muscle with FEM and EMU at one activation, write VTU")
+    d.add_argument("--out", default="emu_compare", help="output folder (default: emu_compare)")
+    d.add_argument("--tets", type=int, default=8000, help="approximate tet count (default 8000)")
+    d.add_argument("--activation", type=float, default=5e4, help="absolute activation a (default 5e4)")
+    d.add_argument("--alpha", type=float, default=100.0, help="EMU alpha relative to the muscle's shear modulus")
+    d.add_argument("--threads", type=int, default=None)
+    d.add_argument("--woodbury", action="store_true", help="also run the paper's Woodbury quasi-Newton step")
+    d.set_defaults(func=_compare)
+    s = sub.add_parser("solve", help="solve a labelled mesh at one activation (bones fixed unless --free-bones)")
+    s.add_argument("mesh")
+    s.add_argument("--free-bones", nargs="*", metavar="BONE", help="bones the muscles move")
+    s.add_argument("--activation", nargs="*", help="NAME=VALUE absolute activations")
+    s.add_argument("--method", choices=["emu", "fem"], default="emu")
+    s.add_argument("--step", choices=["newton-krylov", "woodbury"], default="newton-krylov")
+    s.add_argument("--alpha", type=float, default=100.0)
+    s.add_argument("--threads", type=int, default=None)
+    s.add_argument("--out", default=None, help="write the result here (.vtu)")
+    s.set_defaults(func=_solve)
+    r = sub.add_parser("run", help="run a scene file (TOML/JSON) over its frames")
+    r.add_argument("scene")
+    r.add_argument("--out", default=None, help="output folder (default: the scene's output.dir)")
+    r.add_argument("--threads", type=int, default=None)
+    r.set_defaults(func=_run)
+    i = sub.add_parser("info", help="BLAS, threads; with a mesh or scene file: parts, attachments, defects, "
+                                    "memory estimate")
+    i.add_argument("mesh", nargs="?", help="a labelled mesh (.vtu, ...) or a scene file (.toml, .json)")
+    i.set_defaults(func=_print_info)
+    args = ap.parse_args(argv)
+    try:
+        return args.func(args)
+    except (ValueError, FileNotFoundError, NotImplementedError) as e:
+        print(f"emu: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

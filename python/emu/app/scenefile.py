@@ -1,0 +1,323 @@
+"""Scene files (TOML or JSON): one documented schema, a typed loader, clear errors.
+
+    pins = ["proximal"]          # top level (before any [table] in TOML): named sets and/or
+                                 # vertex ids
+    gravity = [0.0, 0.0, 0.0]
+
+    [mesh]                       # exactly one of: path = "file.vtu" | [mesh.fusiform] | [mesh.arm] | [mesh.neck]
+    path = "../shared/data/big_muscle/big_muscle.vtu"   # relative to the scene file
+    fibers = "file"              # muscles' fibres: "file" (cell data) or "laplace" (between attachments)
+    [mesh.arm]                   # the procedural arm of `emu demo`: bones "humerus" (fixed) and
+    resolution = 2               # "forearm" (moved by the muscles) on a hinge, muscles "flexor"
+                                 # and "extensor" (Laplace fibres)
+    [mesh.neck]                  # a head on a ball joint: bones "torso" (fixed) and "head" (moved),
+    resolution = 2               # muscles "left_back", "right_back", "left_front", "right_front"
+    [mesh.fusiform]              # the procedural muscle (emu.scenes.fusiform): parts "belly"
+    tets = 5000                  # and "tendons", pin sets "proximal" and "distal"
+    length = 10.0
+    radius = 1.5
+    end_radius = 0.5
+    tendon_fraction = 0.12
+
+    [materials.belly]            # per-part overrides (any of the keys)
+    youngs = 6e4
+    poisson = 0.49
+    density = 1060.0
+    max_activation = 1e5
+    acap_weight = 1.0
+
+    [solver]                     # any emu.Solver option
+    method = "emu"               # or "fem"
+    alpha = 100.0
+    modes = 24
+    step = "newton-krylov"       # or "woodbury"
+    rtol_grad = 1e-6
+    rtol_energy = 1e-10
+    max_iterations = 500
+    threads = 2
+
+    [frames]
+    count = 30
+    dt = 0.0333                  # seconds per frame: frame k is at time k * dt
+
+    [activation.belly]           # one table per muscle; muscles not listed stay at 0
+    keys = [[0.0, 0.0], [0.5, 1.0], [1.0, 0.0]]   # [time, value]; or per_frame = [...]
+    interpolation = "smooth"     # "linear", "smooth" or "step"
+    normalized = true            # values in [0, 1] x max_activation; false: absolute a
+
+    [bones.ulna]                 # a bone the muscles move (rigid, turning about its joints)
+    fixed = false
+    acap_weight = 1e4            # EMU's ACAP weight on its tets (rigidity of the fitted positions)
+    joint_stiffness = 0.0        # passive spring against turning from rest, N m / rad
+
+    [joints.elbow]               # a joint declared where two bones do not touch (joints at
+    bones = ["ulna", "humerus"]  # shared vertices are found by themselves): a ball joint at
+    centre = [0.0, 0.0, 0.0]     # `centre`, or with `axis` a hinge about the line through it
+    axis = [0.0, 0.0, 1.0]
+
+    [bones.radius]               # a scripted bone (fixed bones, the default, may be scripted):
+    axis = [0.0, 0.0, 1.0]       # rotation axis through `centre`, angle keyframes in degrees
+    centre = [0.0, 0.0, 0.0]
+    angle = [[0.0, 0.0], [1.0, 30.0]]
+    interpolation = "smooth"
+
+    [output]
+    dir = "emu_run"              # `emu run --out` overrides it
+    vtu = true                   # a VTU per frame and a .pvd series (ParaView)
+    obj = true                   # an OBJ surface per frame (Blender)
+
+Centre is spelled ``centre`` everywhere (a ``center`` key is an error that says so).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..activation import Curve
+from ..io.mesh import load_scene
+from ..parts import lame
+from ..poses import pose_about
+from ..scenes import arm, fusiform, neck
+
+__all__ = ["SceneSpec", "load_scene_file", "SceneFileError"]
+
+
+class SceneFileError(ValueError):
+    """A scene file that does not follow the schema (the message names the key)."""
+
+
+_SCHEMA = {
+    "mesh": {"path": str, "fibers": str, "fusiform": {"tets": int, "resolution": int, "length": float,
+                                                     "radius": float, "end_radius": float,
+                                                     "tendon_fraction": float},
+             "arm": {"resolution": int}, "neck": {"resolution": int}},
+    "materials": "table of tables",
+    "pins": list,
+    "gravity": list,
+    "solver": {"method": str, "alpha": float, "modes": int, "step": str, "rtol_grad": float,
+               "rtol_energy": float, "max_iterations": int, "cg_max_iterations": int, "preconditioner": str,
+               "preconditioner_refresh": int, "exact_when_definite": bool, "threads": int,
+               "bone_coarse_space": bool},
+    "frames": {"count": int, "dt": float},
+    "activation": "table of tables",
+    "bones": "table of tables",
+    "joints": "table of tables",
+    "output": {"dir": str, "vtu": bool, "obj": bool},
+}
+_BONE_KEYS = {"fixed": bool, "acap_weight": float, "joint_stiffness": float, "axis": list, "centre": list,
+              "angle": list, "interpolation": str}
+_JOINT_KEYS = {"bones": list, "centre": list, "axis": list}
+_MATERIAL_KEYS = {"youngs": float, "poisson": float, "density": float, "max_activation": float,
+                  "acap_weight": float}
+_CURVE_KEYS = {"keys": list, "per_frame": list, "interpolation": str, "normalized": bool}
+
+
+@dataclass
+class SceneSpec:
+    scene: object                         # emu.Scene
+    solver: dict                          # emu.Solver keyword arguments (method included)
+    frames: int
+    dt: float
+    curves: dict                          # muscle name -> Curve
+    bones: dict = field(default_factory=dict)  # scripted bone -> (axis (3,), centre (3,), angle Curve)
+    output: dict = field(default_factory=lambda: {"dir": "emu_run", "vtu": True, "obj": True})
+    source: str = ""
+
+    def bone_poses(self, frame: int) -> dict:
+        """{bone: (R, t)} of the scripted bones at a frame."""
+        t = frame * self.dt
+        return {name: pose_about(axis, curve.value(frame, t), centre)
+                for name, (axis, centre, curve) in self.bones.items()}
+
+    def activation(self, frame: int) -> dict:
+        """{muscle: absolute a} at a frame."""
+        t = frame * self.dt
+        out = {}
+        for name, c in self.curves.items():
+            v = c.value(frame, t)
+            out[name] = v * self.scene.parts[name].max_activation if c.normalized else v
+        return out
+
+
+def _type_ok(value, kind) -> bool:
+    if kind is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if kind is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, kind)
+
+
+def _check_table(table, schema, where):
+    if not isinstance(table, dict):
+        raise SceneFileError(f"{where} must be a table, got {type(table).__name__}")
+    for key, value in table.items():
+        if key == "center" and "centre" in schema:
+            name = f"{where}.center" if where else "center"
+            raise SceneFileError(f"'{name}': spell it 'centre' (emu uses the one spelling)")
+        if key not in schema:
+            raise SceneFileError(f"unknown key '{where}.{key}' (allowed: {', '.join(sorted(schema))})"
+                                 if where else f"unknown key '{key}' (allowed: {', '.join(sorted(schema))})")
+        kind = schema[key]
+        name = f"{where}.{key}" if where else key
+        if isinstance(kind, dict):
+            _check_table(value, kind, name)
+        elif kind == "table of tables":
+            if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
+                raise SceneFileError(f"'{name}' must be a table of tables ([{name}.<part name>])")
+        elif not _type_ok(value, kind):
+            raise SceneFileError(f"'{name}' must be {kind.__name__}, got {type(value).__name__} ({value!r})")
+
+
+def _read(path: str) -> dict:
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"scene file not found: {path}")
+    with open(path, "rb") as f:
+        raw = f.read()
+    if path.endswith(".json"):
+        try:
+            return json.loads(raw)
+        except json.JSONDecodeError as e:
+            raise SceneFileError(f"{path}: not valid JSON: {e}") from None
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python < 3.11
+        import tomli as tomllib
+    try:
+        return tomllib.loads(raw.decode())
+    except tomllib.TOMLDecodeError as e:
+        raise SceneFileError(f"{path}: not valid TOML: {e}") from None
+
+
+def load_scene_file(path) -> SceneSpec:
+    """Read and validate a scene file; build its Scene."""
+    path = os.fspath(path)
+    data = _read(path)
+    _check_table(data, _SCHEMA, "")
+    base = os.path.dirname(os.path.abspath(path))
+    mesh = data.get("mesh")
+    if mesh is None:
+        raise SceneFileError("missing [mesh] table (mesh.path or [mesh.fusiform])")
+    if sum(k in mesh for k in ("path", "fusiform", "arm", "neck")) != 1:
+        raise SceneFileError("[mesh] needs exactly one of 'path', [mesh.fusiform], [mesh.arm] or [mesh.neck]")
+    if "path" in mesh:
+        mpath = mesh["path"] if os.path.isabs(mesh["path"]) else os.path.join(base, mesh["path"])
+        if not os.path.exists(mpath):
+            raise FileNotFoundError(f"mesh.path: file not found: {mpath}")
+        fib = mesh.get("fibers", "file")
+        if fib not in ("file", "laplace"):
+            raise SceneFileError(f"mesh.fibers must be 'file' or 'laplace', got {fib!r}")
+        scene = load_scene(mpath, fibers=fib)
+    elif "arm" in mesh or "neck" in mesh:
+        kind = "arm" if "arm" in mesh else "neck"
+        res = int(mesh[kind].get("resolution", 2))
+        if res < 1:
+            raise SceneFileError(f"mesh.{kind}.resolution must be >= 1, got {res}")
+        scene = (arm if kind == "arm" else neck)(res)
+    else:
+        scene = fusiform(**mesh["fusiform"], pins=())
+    named_pins = scene.vertex_sets
+    for part, over in data.get("materials", {}).items():
+        if part not in scene.parts:
+            raise SceneFileError(f"materials.{part}: no part named '{part}' (parts: {', '.join(scene.parts)})")
+        _check_table(over, _MATERIAL_KEYS, f"materials.{part}")
+        p = scene.parts[part]
+        for k, v in over.items():
+            setattr(p, k, float(v))
+        lame(p.youngs, p.poisson)
+    pins = []
+    for i, item in enumerate(data.get("pins", [])):
+        if isinstance(item, str):
+            if item not in named_pins:
+                raise SceneFileError(f"pins[{i}]: unknown pin set '{item}' (known: {', '.join(named_pins) or 'none'})")
+            pins.append(np.asarray(named_pins[item]))
+        elif _type_ok(item, int):
+            pins.append(np.array([item]))
+        else:
+            raise SceneFileError(f"pins[{i}] must be a vertex id or a pin-set name, got {item!r}")
+    if pins:
+        scene.pin(np.concatenate(pins))
+    if "gravity" in data:
+        g = data["gravity"]
+        if len(g) != 3 or not all(_type_ok(v, float) for v in g):
+            raise SceneFileError(f"gravity must be three numbers, got {g!r}")
+        scene.gravity = np.asarray(g, dtype=np.float64)
+    solver = dict(data.get("solver", {}))
+    frames = data.get("frames", {})
+    count, dt = int(frames.get("count", 1)), float(frames.get("dt", 1.0))
+    if count < 1 or dt <= 0:
+        raise SceneFileError(f"frames.count must be >= 1 and frames.dt > 0, got {count}, {dt}")
+    curves = {}
+    for name, spec in data.get("activation", {}).items():
+        if name not in scene.muscles:
+            raise SceneFileError(f"activation.{name}: no muscle named '{name}' (muscles: {', '.join(scene.muscles)})")
+        _check_table(spec, _CURVE_KEYS, f"activation.{name}")
+        try:
+            curves[name] = Curve(keys=spec.get("keys"), per_frame=spec.get("per_frame"),
+                                 interpolation=spec.get("interpolation", "linear"),
+                                 normalized=spec.get("normalized", True))
+        except ValueError as e:
+            raise SceneFileError(f"activation.{name}: {e}") from None
+        if curves[name].per_frame is not None and len(curves[name].per_frame) < count:
+            raise SceneFileError(f"activation.{name}.per_frame has {len(curves[name].per_frame)} values for "
+                                 f"{count} frames")
+    bones = {}
+    for name, spec in data.get("bones", {}).items():
+        part = scene.parts.get(name)
+        if part is None or part.kind != "bone":
+            known = [p.name for p in scene.parts.values() if p.kind == "bone"]
+            raise SceneFileError(f"bones.{name}: no bone named '{name}' (bones: {', '.join(known) or 'none'})")
+        _check_table(spec, _BONE_KEYS, f"bones.{name}")
+        if "fixed" in spec:
+            part.fixed = bool(spec["fixed"])
+        if "joint_stiffness" in spec:
+            if not spec["joint_stiffness"] >= 0:
+                raise SceneFileError(f"bones.{name}.joint_stiffness must be >= 0, got {spec['joint_stiffness']!r}")
+            part.joint_stiffness = float(spec["joint_stiffness"])
+        if "acap_weight" in spec:
+            if not spec["acap_weight"] > 0:
+                raise SceneFileError(f"bones.{name}.acap_weight must be positive, got {spec['acap_weight']!r}")
+            part.acap_weight = float(spec["acap_weight"])
+        scripted = [k for k in ("axis", "centre", "angle") if k in spec]
+        if not scripted:
+            continue
+        if not part.fixed:
+            raise SceneFileError(f"bones.{name}: a bone moved by the muscles (fixed = false) cannot be scripted "
+                                 f"({', '.join(scripted)} given)")
+        for key in ("axis", "centre", "angle"):
+            if key not in spec:
+                raise SceneFileError(f"bones.{name}: missing '{key}' (a scripted bone needs axis, centre, angle)")
+        for key in ("axis", "centre"):
+            v = spec[key]
+            if len(v) != 3 or not all(_type_ok(x, float) for x in v):
+                raise SceneFileError(f"bones.{name}.{key} must be three numbers, got {v!r}")
+        if not any(spec["axis"]):
+            raise SceneFileError(f"bones.{name}.axis must be non-zero")
+        try:
+            curve = Curve(keys=spec["angle"], interpolation=spec.get("interpolation", "linear"), signed=True)
+        except ValueError as e:
+            raise SceneFileError(f"bones.{name}.angle: {e}") from None
+        bones[name] = (np.asarray(spec["axis"], float), np.asarray(spec["centre"], float), curve)
+    for name, spec in data.get("joints", {}).items():
+        _check_table(spec, _JOINT_KEYS, f"joints.{name}")
+        for key in ("bones", "centre"):
+            if key not in spec:
+                raise SceneFileError(f"joints.{name}: missing '{key}'")
+        b = spec["bones"]
+        if len(b) != 2 or not all(isinstance(x, str) for x in b):
+            raise SceneFileError(f"joints.{name}.bones must be two bone names, got {b!r}")
+        for key in ("centre", "axis"):
+            v = spec.get(key)
+            if v is not None and (len(v) != 3 or not all(_type_ok(x, float) for x in v)):
+                raise SceneFileError(f"joints.{name}.{key} must be three numbers, got {v!r}")
+        try:
+            scene.add_joint(b[0], b[1], spec["centre"], spec.get("axis"))
+        except ValueError as e:
+            raise SceneFileError(f"joints.{name}: {e}") from None
+    output = {"dir": "emu_run", "vtu": True, "obj": True}
+    output.update(data.get("output", {}))
+    return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, bones=bones, output=output,
+                     source=path)

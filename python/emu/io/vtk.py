@@ -1,0 +1,78 @@
+"""Solved frames for ParaView: one VTU per frame (through meshio) and the
+``.pvd`` collection that makes them a time series."""
+from __future__ import annotations
+
+import os
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from ..checks import signed_volumes
+from ..geometry import deformation_gradients
+from ..lowering import tet_fibers
+from .mesh import write
+
+__all__ = ["write_solution", "write_pvd", "tet_activation"]
+
+
+def tet_activation(scene, activation) -> np.ndarray:
+    """Per-tet activation (m,) from {muscle name: a} (tets of other parts: 0) or
+    from an (m,) array, checked."""
+    m = len(scene.tets)
+    if isinstance(activation, dict):
+        act = np.zeros(m)
+        for name, v in activation.items():
+            p = scene.parts.get(name)
+            if p is None or p.kind != "muscle":
+                raise ValueError(f"activation: no muscle named {name!r} (muscles: {', '.join(scene.muscles)})")
+            act[p.tets] = float(v)
+        return act
+    act = np.asarray(activation, dtype=np.float64)
+    if act.shape != (m,):
+        raise ValueError(f"activation must be a {{muscle: a}} dict or one value per tet ({m},), got shape "
+                         f"{act.shape}")
+    return act
+
+
+def write_solution(path, scene, solution, *, activation=None, fibers=None):
+    """A solved frame as a mesh: deformed points; point data displacement; cell
+    data part (index in scene.parts), fiber (deformed, unit), J and, if given,
+    activation.
+
+    solution    a Solution or its (n, 3) positions
+    activation  what the frame was solved with: {muscle: absolute a} (other tets
+                0) or an (m,) per-tet array; None: no activation cell data
+    fibers      (m, 3) rest fibre directions per tet (a Solver's ``fibers``);
+                None: the scene's (a Laplace field, computed and not stored, for a
+                muscle that has none; see emu.lowering.tet_fibers)
+    """
+    x = np.asarray(getattr(solution, "positions", solution), dtype=np.float64)
+    if x.shape != scene.points.shape:
+        raise ValueError(f"write_solution: positions must have shape {scene.points.shape}, got {x.shape}")
+    part = np.full(len(scene.tets), -1, np.int32)
+    for i, p in enumerate(scene.parts.values()):
+        part[p.tets] = i
+    fib = tet_fibers(scene) if fibers is None else np.asarray(fibers, dtype=np.float64)
+    if fib.shape != (len(scene.tets), 3):
+        raise ValueError(f"write_solution: fibers must have shape ({len(scene.tets)}, 3), got {fib.shape}")
+    # deformed fibre direction F u, from the positions (both methods)
+    F = deformation_gradients(scene.points, scene.tets, x)
+    fu = np.einsum("tij,tj->ti", F, fib)
+    n = np.linalg.norm(fu, axis=1, keepdims=True)
+    fu = np.divide(fu, n, out=np.zeros_like(fu), where=n > 0)
+    J = signed_volumes(x, scene.tets) / signed_volumes(scene.points, scene.tets)
+    cell_data = {"part": part, "fiber": fu}
+    if activation is not None:
+        cell_data["activation"] = tet_activation(scene, activation)
+    cell_data["J"] = J
+    write(path, x, scene.tets, cell_data=cell_data, point_data={"displacement": x - scene.points})
+
+
+def write_pvd(path, entries):
+    """entries: [(time, relative file name)] -> a ParaView collection file."""
+    lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1">', "  <Collection>"]
+    for t, name in entries:
+        lines.append(f'    <DataSet timestep="{t:.9g}" part="0" file={quoteattr(name)}/>')
+    lines += ["  </Collection>", "</VTKFile>", ""]
+    with open(path, "w") as f:
+        f.write("\n".join(lines))

@@ -1,0 +1,109 @@
+"""The `emu` command line (emu.cli, code in emu.app.cli), run as a user runs
+it: a separate process through ``python -m emu.cli`` (the entry point
+pyproject.toml names)."""
+import json
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+
+import meshio
+import numpy as np
+import pytest
+
+import emu
+
+from conftest import bone_muscle_bone
+from test_scenefile import GOOD, write
+
+
+def emu_cli(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "emu.cli", *args], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def test_emu_run_end_to_end(tmp_path):
+    scene = write(tmp_path, GOOD)
+    out = tmp_path / "out"
+    r = emu_cli("run", str(scene), "--out", str(out))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "frame 3/3" in r.stdout
+    files = [d.attrib["file"] for d in ET.parse(out / "series.pvd").getroot().iter("DataSet")]
+    assert files == ["frame_0000.vtu", "frame_0001.vtu", "frame_0002.vtu"]
+    assert all((out / f).exists() and (out / f.replace(".vtu", ".obj")).exists() for f in files)
+    log = json.loads((out / "log.json").read_text())
+    assert len(log["frames"]) == 3 and all(f["converged"] for f in log["frames"])
+
+
+def test_emu_run_reports_a_missing_scene_file(tmp_path):
+    r = emu_cli("run", str(tmp_path / "absent.toml"), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2 and "scene file not found" in r.stderr, r.stderr
+
+
+def test_emu_compare(tmp_path):
+    out = tmp_path / "cmp"
+    r = emu_cli("compare", "--tets", "800", "--out", str(out))
+    assert r.returncode == 0, r.stdout + r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    res = summary["results"]
+    assert set(res) == {"fem", "emu_newton_krylov"} and all(v["converged"] for v in res.values())
+    assert 0.05 < res["fem"]["shortening"] < 0.5            # a = 5e4 shortens the muscle visibly
+    assert 1e-4 < res["emu_newton_krylov"]["vertex_error_to_fem"] < 5e-2
+    m = meshio.read(out / "fem.vtu")
+    act = np.asarray(m.cell_data["activation"][0]).ravel()
+    belly = emu.scenes.fusiform(tets=800).parts["belly"].tets
+    np.testing.assert_allclose(act[belly], 5e4)
+
+
+def test_emu_solve_a_labelled_mesh(tmp_path):
+    s, m, _ = bone_muscle_bone(0.15, r=2)
+    part = np.zeros(len(m.tets), np.int32)
+    for i, name in enumerate(["belly", "proximal", "distal"]):
+        part[s.parts[name].tets] = i
+    mesh = tmp_path / "bmb.vtu"
+    emu.io.write(mesh, m.points, m.tets, cell_data={"part": part})
+    (tmp_path / "scene.json").write_text(json.dumps({"parts": [
+        {"id": 0, "name": "belly", "kind": "muscle"}, {"id": 1, "name": "proximal", "kind": "bone"},
+        {"id": 2, "name": "distal", "kind": "bone"}]}))
+    out = tmp_path / "sol.vtu"
+    # no fibre cell data: the loader needs fibers="laplace", and says so
+    r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--out", str(out))
+    assert r.returncode == 2 and "needs 'fiber' cell data" in r.stderr, r.stdout + r.stderr
+    emu.io.write(mesh, m.points, m.tets, cell_data={"part": part, "fiber": np.tile([0.0, 0.0, 1.0], (len(m.tets), 1))})
+    r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--method", "fem", "--out", str(out))
+    assert r.returncode == 0, r.stdout + r.stderr
+    sol = meshio.read(out)
+    act = np.asarray(sol.cell_data["activation"][0]).ravel()
+    np.testing.assert_allclose(act[s.parts["belly"].tets], 1e4)
+    np.testing.assert_array_equal(act[s.parts["proximal"].tets], 0.0)
+    assert np.abs(sol.point_data["displacement"]).max() > 1e-3
+
+
+def test_emu_info_on_a_scene_file(tmp_path):
+    scene = write(tmp_path, GOOD)
+    r = emu_cli("info", str(scene), timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "BLAS" in r.stdout and "part belly: muscle" in r.stdout
+    assert "frames: 3 x 0.5 s" in r.stdout and "activation belly: 2 keys" in r.stdout
+    bad = write(tmp_path, GOOD.replace("[frames]", "[frames]\nspeed = 1"), "bad.toml")
+    r = emu_cli("info", str(bad), timeout=120)
+    assert r.returncode == 2 and "unknown key 'frames.speed'" in r.stderr
+
+
+def test_emu_demo_end_to_end(tmp_path):
+    out = tmp_path / "demo"
+    r = emu_cli("demo", "--resolution", "1", "--frames", "5", "--out", str(out), timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    for name in ("contact_sheet.png", "elbow_angle.png"):
+        data = (out / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10000
+    files = [d.attrib["file"] for d in ET.parse(out / "series.pvd").getroot().iter("DataSet")]
+    assert len(files) == 5
+    m = meshio.read(out / files[1])  # t = 0.5 s, the flexor's peak: the forearm has turned
+    assert np.abs(m.point_data["displacement"]).max() > 1e-3
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["all_converged"] and summary["frames"] == 5
+    angles = summary["elbow_angle_deg"]
+    assert angles[1] > 10 and abs(angles[2]) < 0.1 and angles[3] < -3, angles  # flexes, back, extends
+    assert summary["max_angle_difference_deg"] < 3.0
+    log = json.loads((out / "log.json").read_text())
+    assert [f["bone_angles_deg"]["forearm"] for f in log["frames"]] == pytest.approx(angles)
