@@ -174,3 +174,22 @@ def test_checker_flags_an_upward_import_and_a_cycle():
     _, pkg = imports_of("from .. import _core\nfrom .mesh import read\n", "emu.io", True, known | {"emu._core"})
     assert pkg == [(1, "emu._core"), (2, "emu.io.mesh")]
     assert cycles({"emu.a": [(1, "emu.b")], "emu.b": [(3, "emu.a")]}) == [["emu.a", "emu.b", "emu.a"]]
+
+
+def reachable(edges: dict, start: str) -> set:
+    """Every module ``start`` imports, directly or through others."""
+    seen, todo = set(), [start]
+    while todo:
+        for _, t in edges.get(todo.pop(), []):
+            if t not in seen:
+                seen.add(t)
+                todo.append(t)
+    return seen
+
+
+@pytest.mark.parametrize("loader", ["emu.app.scenefile", "emu.io", "emu.io.mesh", "emu.io.vtk", "emu.scenes"])
+def test_file_loaders_do_not_import_the_solver(loader):
+    """Reading a scene (a scene file, a mesh) needs no solver: poses live in
+    emu.poses, the model lowering in emu.lowering."""
+    edges, _ = graph()
+    assert "emu.solve" not in reachable(edges, loader)

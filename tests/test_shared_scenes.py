@@ -7,10 +7,7 @@ import pytest
 
 import emu
 
-from conftest import SHARED_DATA
-
-if not SHARED_DATA.is_dir():
-    pytest.skip(f"shared scenes not found at {SHARED_DATA}", allow_module_level=True)
+from conftest import shared_path
 
 ACTIVATION = {"muscle": 1e4}
 # measured EMU(alpha = 100 mu, k = 48) vertex errors to FEM: simple_joint 1.1e-3, big_muscle 1.4e-2
@@ -20,7 +17,7 @@ ERROR_BOUND = {"simple_joint": 5e-3, "big_muscle": 4e-2}
 def load(name):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        scene = emu.io.load_scene(SHARED_DATA / name / f"{name}.vtu")
+        scene = emu.io.load_scene(shared_path(name))
     return scene, [w for w in caught if issubclass(w.category, emu.MeshWarning)]
 
 
@@ -89,3 +86,10 @@ def test_emu_converges_close_to_fem(solved):
     assert err < ERROR_BOUND[name]
     # EMU is a different discretisation: it is close to FEM, not identical
     assert err > 1e-8
+
+
+def test_missing_shared_data_skips_with_the_path():
+    """Every test reads the shared scenes through conftest.shared_path: absent,
+    the test is skipped, naming where it looked."""
+    with pytest.raises(pytest.skip.Exception, match=r"shared data not found at .*no_such_scene\.vtu"):
+        shared_path("no_such_scene")
