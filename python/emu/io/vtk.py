@@ -2,7 +2,6 @@
 ``.pvd`` collection that makes them a time series."""
 from __future__ import annotations
 
-import os
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
