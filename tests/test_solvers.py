@@ -131,8 +131,9 @@ class NumpyFEM:
 
     def solve(self, x0, gtol=1e-10, max_iterations=100):
         """Newton: the exact Hessian where it is definite, else projected; Armijo
-        backtracking. Stops on |g| <= gtol |g0| or, after a full exact step, on a
-        step below 1e-13 of the mesh size (roundoff)."""
+        backtracking (full exact steps once they are under 1e-8 of the mesh
+        size, where the energy is at round-off). Stops on |g| <= gtol |g0| or on
+        an exact step below 1e-13 of the mesh size (round-off)."""
         x = x0.ravel().copy()
         fd = self.fdof
         g0 = np.linalg.norm(self.gradient(x)[fd])
@@ -151,6 +152,12 @@ class NumpyFEM:
             d = -sl.cho_solve(c, g)
             if exact and np.abs(d).max() < 1e-13 * diag:
                 return x.reshape(-1, 3), it
+            if exact and np.abs(d).max() < 1e-8 * diag:
+                # Newton's local regime: this energy (evaluated as written, with
+                # O(eps lambda) round-off) can no longer rank steps this short, and
+                # the full exact step converges quadratically.
+                x[fd] += d
+                continue
             E0, slope, s = self.energy(x), g @ d, 1.0
             assert slope < 0
             while True:
