@@ -24,6 +24,31 @@ def shared_path(name: str) -> Path:
     return path
 
 
+# the authors' original files, at their repository paths (emu.datasets reads them offline)
+SHARED_RAW = SHARED_DATA / "raw" / "fast_muscles"
+
+
+def shared_raw() -> Path:
+    """The local copy of the authors' repository files; skips the calling test
+    when it is not there (the same way as shared_path)."""
+    if not (SHARED_RAW / "Scripts").is_dir():
+        pytest.skip(f"shared data not found at {SHARED_RAW}")
+    return SHARED_RAW
+
+
+@pytest.fixture(scope="session", autouse=True)
+def research_scenes_offline(tmp_path_factory):
+    """emu.datasets (scene files' mesh.dataset, `emu data`) reads the shared copy
+    of the authors' files instead of the network, into a cache of the session's
+    own; a test that needs them calls shared_raw() first to skip without them."""
+    mp = pytest.MonkeyPatch()
+    if (SHARED_RAW / "Scripts").is_dir():
+        mp.setenv("EMU_DATA_DIR", str(SHARED_RAW))
+    mp.setenv("EMU_CACHE_DIR", str(tmp_path_factory.mktemp("emu_cache")))
+    yield
+    mp.undo()
+
+
 def shared_scene(name: str, **load_options):
     """emu.io.load_scene of the shared research scene ``name`` (see shared_path);
     load_options go to load_scene (free_bones, fibers, warn)."""

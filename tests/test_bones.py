@@ -380,7 +380,11 @@ def test_no_neutral_mode_where_muscles_hold_the_bone(small_arm):
     with w.catch_warnings():
         w.simplefilter("error", emu.NeutralModeWarning)
         for method in ("fem", "emu"):
-            assert emu.Solver(small_arm, method).solve({"flexor": 0.3}, normalized=True).neutral_modes == []
+            sol = emu.Solver(small_arm, method).solve({"flexor": 0.3}, normalized=True)
+            # a finished solve that turned the forearm, not an aborted one with nothing to report
+            assert sol.converged and sol.iterations > 0, sol.status
+            assert bone_motion(small_arm, sol, "forearm").angle_deg > 1.0
+            assert sol.neutral_modes == []
 
 
 @pytest.mark.parametrize("method", ["fem", "emu"])
@@ -409,3 +413,20 @@ def test_gravity_on_a_movable_bone():
         assert sol.converged, sol.status
         angles[method] = signed_angle(bone_motion(s, sol, "forearm").R, [0, 0, 1])
     assert angles["fem"] < -1.0 and abs(angles["emu"] - angles["fem"]) < 0.5, angles
+
+
+def test_rigid_fit_recovers_a_rigid_motion():
+    from emu.bones import rigid_fit
+
+    rng = np.random.default_rng(4)
+    X = rng.standard_normal((20, 3))
+    R = emu.rotation([1.0, -2.0, 0.5], 140.0)
+    t = np.array([0.3, -1.0, 2.0])
+    Rf, tf = rigid_fit(X, X @ R.T + t)
+    np.testing.assert_allclose(Rf, R, atol=1e-12)
+    np.testing.assert_allclose(tf, t, atol=1e-12)
+    # a mirror image is fitted by the nearest proper rotation, never a reflection
+    Rm, _ = rigid_fit(X, X * [-1.0, 1.0, 1.0])
+    assert np.linalg.det(Rm) == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="equal shape"):
+        rigid_fit(X, X[:5])

@@ -107,3 +107,22 @@ def test_emu_demo_end_to_end(tmp_path):
     assert summary["max_angle_difference_deg"] < 3.0
     log = json.loads((out / "log.json").read_text())
     assert [f["bone_angles_deg"]["forearm"] for f in log["frames"]] == pytest.approx(angles)
+
+
+def test_emu_data_and_scene_names(tmp_path):
+    """`emu data NAME` fetches (here from the shared offline copy: conftest sets
+    EMU_DATA_DIR) and says where; `emu info NAME` / `emu solve NAME` take the
+    name in place of a mesh; an unknown name is an error that lists the known."""
+    from conftest import shared_raw
+
+    shared_raw()
+    r = emu_cli("data", "simple_joint")
+    assert r.returncode == 0, r.stderr
+    assert "simple_joint: " in r.stdout and "116b1308ce99" in r.stdout
+    path = r.stdout.split("simple_joint: ")[1].split()[0]
+    assert path.endswith("simple_joint.vtu") and meshio.read(path).points.shape == (2452, 3)
+    r = emu_cli("info", "simple_joint")
+    assert r.returncode == 0, r.stderr
+    assert "bottom_bone" in r.stdout and "hinge" in r.stdout
+    r = emu_cli("data", "no_such_scene")
+    assert r.returncode == 1 and "no_such_scene" in r.stderr and "simple_joint" in r.stderr

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 
 from emu import datasets
+from conftest import SHARED_DATA as SHARED
+from conftest import SHARED_RAW as RAW
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared" / "data"
-RAW = SHARED / "raw" / "fast_muscles"
 
+# the same skip as conftest.shared_path / shared_raw, as a marker
 needs_shared = pytest.mark.skipif(
     not (RAW / "Scripts").is_dir(),
-    reason=f"the shared research data ({SHARED}) is not on this machine")
+    reason=f"shared data not found at {RAW}")
 
 
 @pytest.fixture

@@ -57,6 +57,43 @@ def test_load_scene_needs_part_labels(tmp_path, mesh):
         emu.io.load_scene(path)
 
 
+def test_unlabelled_tets_join_the_part_holding_their_vertices(tmp_path, mesh):
+    """Tets labelled -1 (as 7 of the authors' realistic_biceps are) join the part
+    that holds most of their vertices, taking its neighbours' mean fibre, with a
+    warning; one that touches no labelled tet is an error."""
+    m, part = mesh
+    part = part.copy()
+    fib = m.fibers.copy()
+    z = m.points[m.tets].mean(axis=1)[:, 2]
+    lost = np.flatnonzero((part == 0) & (np.abs(z - 0.5 * m.length) < 0.4))[:6]
+    assert len(lost) == 6
+    part[lost] = -1
+    fib[lost] = 0.0
+    path = tmp_path / "holes.vtu"
+    emu.io.write(path, m.points, m.tets, cell_data={"part": part, "fiber": fib})
+    with pytest.warns(emu.MeshWarning, match="6 tet\\(s\\) had no part label"):
+        scene = emu.io.load_scene(path)
+    assert sorted(scene.parts) == ["part0", "part1"]
+    assert set(lost) <= set(scene.parts["part0"].tets)
+    got = scene.parts["part0"].fibers[np.searchsorted(scene.parts["part0"].tets, lost)]
+    np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0)
+    assert np.all(np.einsum("ij,ij->i", got, m.fibers[lost]) > 0.95)   # close to the true meridian fibre
+    # everything unlabelled: nothing to join
+    emu.io.write(path, m.points, m.tets, cell_data={"part": np.full(len(m.tets), -1, np.int32), "fiber": fib})
+    with pytest.raises(ValueError, match="share no vertex with a labelled tet"):
+        emu.io.load_scene(path)
+
+
+def test_realistic_biceps_loads(tmp_path):
+    from conftest import shared_path
+
+    with pytest.warns(emu.MeshWarning, match="7 tet\\(s\\) had no part label"):
+        scene = emu.io.load_scene(shared_path("realistic_biceps"), free_bones=["forearm"])
+    assert sorted(scene.parts) == ["biceps", "forearm", "humerus", "scapula"]
+    assert len(scene.parts["biceps"].tets) == 11995 + 7
+    assert sorted(j.kind for j in scene.joints()) == ["ball", "hinge"]
+
+
 def solved_scene():
     s, m = small_scene(2)
     sol = emu.solve(s, {"belly": 5e4}, "fem")

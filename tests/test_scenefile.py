@@ -9,7 +9,7 @@ import pytest
 import emu
 from emu.scenefile import SceneFileError, load_scene_file
 
-from conftest import bone_muscle_bone, gap_scene
+from conftest import bone_muscle_bone, gap_scene, shared_path, shared_raw
 
 GOOD = """
 pins = ["proximal"]
@@ -82,10 +82,31 @@ def test_fusiform_mesh_is_the_built_in_scene(tmp_path):
      r"activation.belly: .*\[0, 1\]"),
     (lambda s: s + "\n[output]\nvtu = 1\n", SceneFileError, "'output.vtu' must be bool"),
     (lambda s: s.replace("[frames]", "[frames\n"), SceneFileError, "not valid TOML"),
+    (lambda s: s.replace("[mesh.fusiform]\ntets = 800", '[mesh]\ndataset = "big_biceps"'), SceneFileError,
+     "unknown research scene 'big_biceps' .*simple_joint"),
+    (lambda s: s.replace("[mesh.fusiform]\ntets = 800", '[mesh]\ndataset = "simple_joint"\npath = "a.vtu"'),
+     SceneFileError, "exactly one of"),
+    (lambda s: s.replace("[mesh.fusiform]\ntets = 800", '[mesh]\nfibers = "laplace"\n[mesh.fusiform]\ntets = 800'),
+     SceneFileError, "mesh.fibers applies to mesh.path or mesh.dataset only"),
 ])
 def test_scene_file_errors(tmp_path, edit, exc, match):
     with pytest.raises(exc, match=match):
         load_scene_file(write(tmp_path, edit(GOOD)))
+
+
+def test_scene_file_names_a_research_scene(tmp_path):
+    """mesh.dataset loads the authors' scene through emu.datasets (here from the
+    shared offline copy, see conftest): the same scene as the converted file."""
+    shared_raw()
+    text = GOOD.replace("[mesh.fusiform]\ntets = 800", '[mesh]\ndataset = "simple_joint"').replace(
+        'pins = ["proximal"]', "").replace("[materials.belly]\nyoungs = 5e4", "").replace(
+        "[activation.belly]", "[activation.muscle]")
+    spec = load_scene_file(write(tmp_path, text))
+    ref = emu.io.load_scene(shared_path("simple_joint"), warn=False)
+    np.testing.assert_array_equal(spec.scene.points, ref.points)
+    np.testing.assert_array_equal(spec.scene.tets, ref.tets)
+    assert list(spec.scene.parts) == list(ref.parts)
+    np.testing.assert_array_equal(spec.scene.parts["muscle"].fibers, ref.parts["muscle"].fibers)
 
 
 def test_missing_scene_file(tmp_path):

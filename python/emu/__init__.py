@@ -19,8 +19,8 @@ from .runtime import __version__, info
 from .scene import MeshWarning, Scene
 from .solve import NeutralModeWarning, Solution, Solver, solve
 from .bones import bone_motion, rigid_fit, signed_angle
-from . import activation, bones, fibers, geometry, io, joints, lowering, meshes, poses, run, scenefile, scenes
+from . import activation, bones, datasets, fibers, geometry, io, joints, lowering, meshes, poses, run, scenefile, scenes
 
 __all__ = ["Scene", "Part", "Joint", "MeshWarning", "lame", "Solver", "Solution", "solve", "rotation", "pose_about",
-           "io", "meshes", "scenes", "fibers", "info", "vertex_error", "bbox_diagonal", "bone_motion", "rigid_fit",
+           "io", "meshes", "scenes", "datasets", "fibers", "info", "vertex_error", "bbox_diagonal", "bone_motion", "rigid_fit",
            "signed_angle", "NeutralModeWarning", "__version__"]

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _core
 from .geometry import bbox_diagonal
 
 __all__ = ["BoneMotion", "rigid_fit", "bone_motion", "signed_angle", "bone_angle"]
@@ -27,11 +28,11 @@ def rigid_fit(X: np.ndarray, Y: np.ndarray) -> tuple:
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     if X.shape != Y.shape or X.ndim != 2 or X.shape[1] != 3:
         raise ValueError(f"need two (n, 3) point arrays of equal shape, got {X.shape} and {Y.shape}")
-    xc, yc = X.mean(axis=0), Y.mean(axis=0)
-    U, _, Vt = np.linalg.svd((X - xc).T @ (Y - yc))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    R = Vt.T @ D @ U.T
-    return R, yc - R @ xc
+    if len(X) == 0:
+        raise ValueError("need at least one point to fit a rigid motion")
+    # the same Kabsch fit the FEM solver starts its rigid bones with (linalg/rotation.h)
+    R = np.asarray(_core.best_rotation(X, Y))
+    return R, Y.mean(axis=0) - R @ X.mean(axis=0)
 
 
 def bone_motion(scene, positions, bone: str) -> BoneMotion:

@@ -1,6 +1,5 @@
-"""The ``emu`` command: its code is emu.app.cli. This module stays because
-pyproject.toml's entry point names ``emu.cli:main`` (and ``python -m emu.cli``
-keeps working)."""
+"""``python -m emu.cli``: the ``emu`` command, whose code is emu.app.cli (the
+installed ``emu`` entry point names emu.app.cli:main directly)."""
 import sys
 
 from .app.cli import main

@@ -5,6 +5,11 @@
     emu solve MESH --activation NAME=A [NAME=A ...] [--free-bones BONE ...] [--method emu|fem] [--out FILE.vtu]
     emu run SCENE.toml [--out DIR]
     emu info [MESH]
+    emu data [NAME ...]
+
+MESH is a mesh file or the name of one of the authors' research scenes
+(simple_joint, big_muscle, realistic_biceps: downloaded on first use, see
+emu.datasets).
 """
 from __future__ import annotations
 
@@ -17,6 +22,7 @@ import warnings
 
 import numpy as np
 
+from .. import datasets
 from ..geometry import vertex_error
 from ..io.mesh import load_scene
 from ..io.vtk import write_solution
@@ -44,7 +50,7 @@ def _print_info(args):
         else:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                scene = load_scene(args.mesh, warn=False)
+                scene = load_scene(mesh_path(args.mesh), warn=False)
         print(scene)
         for line in scene.mesh_report.lines():
             print("  " + line)
@@ -149,10 +155,22 @@ def _parse_activation(items):
     return act
 
 
+def mesh_path(arg: str) -> str:
+    """A mesh file, or the converted file of a research scene named ``arg``
+    (fetched on first use)."""
+    if os.path.exists(arg) or arg not in datasets.names():
+        return arg
+    return datasets.path(arg, progress=lambda m: print(f"emu: {m}", file=sys.stderr))
+
+
+def _data(args):
+    return datasets.fetch_main(args.names or None)
+
+
 def _solve(args):
     if args.threads:
         set_threads(args.threads)
-    scene = load_scene(args.mesh, free_bones=args.free_bones or ())
+    scene = load_scene(mesh_path(args.mesh), free_bones=args.free_bones or ())
     print(scene)
     act = _parse_activation(args.activation)
     kw = dict(alpha=args.alpha, step=args.step) if args.method == "emu" else {}
@@ -198,7 +216,7 @@ def main(argv=None):
     d.add_argument("--woodbury", action="store_true", help="also run the paper's Woodbury quasi-Newton step")
     d.set_defaults(func=_compare)
     s = sub.add_parser("solve", help="solve a labelled mesh at one activation (bones fixed unless --free-bones)")
-    s.add_argument("mesh")
+    s.add_argument("mesh", help="a labelled mesh file, or a research scene name (" + ", ".join(datasets.names()) + ")")
     s.add_argument("--free-bones", nargs="*", metavar="BONE", help="bones the muscles move")
     s.add_argument("--activation", nargs="*", help="NAME=VALUE absolute activations")
     s.add_argument("--method", choices=["emu", "fem"], default="emu")
@@ -216,10 +234,14 @@ def main(argv=None):
                                     "memory estimate")
     i.add_argument("mesh", nargs="?", help="a labelled mesh (.vtu, ...) or a scene file (.toml, .json)")
     i.set_defaults(func=_print_info)
+    g = sub.add_parser("data", help="download and convert the authors' research scenes ahead of use "
+                                    "(default: all); EMU_DATA_DIR: a local copy instead of the network")
+    g.add_argument("names", nargs="*", metavar="NAME", help=", ".join(datasets.names()))
+    g.set_defaults(func=_data)
     args = ap.parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError, NotImplementedError) as e:
+    except (ValueError, FileNotFoundError, NotImplementedError, datasets.DatasetError) as e:
         print(f"emu: error: {e}", file=sys.stderr)
         return 2
 

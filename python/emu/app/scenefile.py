@@ -4,8 +4,10 @@
                                  # vertex ids
     gravity = [0.0, 0.0, 0.0]
 
-    [mesh]                       # exactly one of: path = "file.vtu" | [mesh.fusiform] | [mesh.arm] | [mesh.neck]
-    path = "../shared/data/big_muscle/big_muscle.vtu"   # relative to the scene file
+    [mesh]                       # exactly one of: path | dataset | [mesh.fusiform] | [mesh.arm] | [mesh.neck]
+    path = "muscle.vtu"          # a labelled mesh file, relative to the scene file
+    dataset = "big_muscle"       # or one of the authors' research scenes (simple_joint, big_muscle,
+                                 # realistic_biceps), downloaded on first use (emu.datasets, `emu data`)
     fibers = "file"              # muscles' fibres: "file" (cell data) or "laplace" (between attachments)
     [mesh.arm]                   # the procedural arm of `emu demo`: bones "humerus" (fixed) and
     resolution = 2               # "forearm" (moved by the muscles) on a hinge, muscles "flexor"
@@ -78,6 +80,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..activation import Curve
+from .. import datasets
 from ..io.mesh import load_scene
 from ..parts import lame
 from ..poses import pose_about
@@ -91,7 +94,7 @@ class SceneFileError(ValueError):
 
 
 _SCHEMA = {
-    "mesh": {"path": str, "fibers": str, "fusiform": {"tets": int, "resolution": int, "length": float,
+    "mesh": {"path": str, "dataset": str, "fibers": str, "fusiform": {"tets": int, "resolution": int, "length": float,
                                                      "radius": float, "end_radius": float,
                                                      "tendon_fraction": float},
              "arm": {"resolution": int}, "neck": {"resolution": int}},
@@ -200,13 +203,22 @@ def load_scene_file(path) -> SceneSpec:
     base = os.path.dirname(os.path.abspath(path))
     mesh = data.get("mesh")
     if mesh is None:
-        raise SceneFileError("missing [mesh] table (mesh.path or [mesh.fusiform])")
-    if sum(k in mesh for k in ("path", "fusiform", "arm", "neck")) != 1:
-        raise SceneFileError("[mesh] needs exactly one of 'path', [mesh.fusiform], [mesh.arm] or [mesh.neck]")
-    if "path" in mesh:
-        mpath = mesh["path"] if os.path.isabs(mesh["path"]) else os.path.join(base, mesh["path"])
-        if not os.path.exists(mpath):
-            raise FileNotFoundError(f"mesh.path: file not found: {mpath}")
+        raise SceneFileError("missing [mesh] table (mesh.path, mesh.dataset or [mesh.fusiform])")
+    if sum(k in mesh for k in ("path", "dataset", "fusiform", "arm", "neck")) != 1:
+        raise SceneFileError("[mesh] needs exactly one of 'path', 'dataset', [mesh.fusiform], [mesh.arm] or "
+                             "[mesh.neck]")
+    if "fibers" in mesh and not ("path" in mesh or "dataset" in mesh):
+        raise SceneFileError("mesh.fibers applies to mesh.path or mesh.dataset only")
+    if "path" in mesh or "dataset" in mesh:
+        if "path" in mesh:
+            mpath = mesh["path"] if os.path.isabs(mesh["path"]) else os.path.join(base, mesh["path"])
+            if not os.path.exists(mpath):
+                raise FileNotFoundError(f"mesh.path: file not found: {mpath}")
+        else:
+            if mesh["dataset"] not in datasets.names():
+                raise SceneFileError(f"mesh.dataset: unknown research scene {mesh['dataset']!r} "
+                                     f"(known: {', '.join(datasets.names())})")
+            mpath = datasets.path(mesh["dataset"])
         fib = mesh.get("fibers", "file")
         if fib not in ("file", "laplace"):
             raise SceneFileError(f"mesh.fibers must be 'file' or 'laplace', got {fib!r}")

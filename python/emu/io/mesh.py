@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..scene import Scene
+from ..scene import MeshWarning, Scene
 
 __all__ = ["TetMesh", "read", "write", "load_scene"]
 
@@ -101,11 +101,12 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_
     part = mesh.part
     if part is None:
         raise ValueError(f"{path} has no part labels (cell data 'part', 'gmsh:physical' or 'medit:ref')")
+    fib = mesh.fiber
+    part, fib = label_unlabelled_tets(mesh.tets, part, fib, path=path, warn=warn)
     with warnings.catch_warnings():
         if not warn:
             warnings.simplefilter("ignore")
         scene = Scene(mesh.points, mesh.tets, warn=warn)
-    fib = mesh.fiber
     free_bones = [free_bones] if isinstance(free_bones, str) else list(free_bones)
     bone_names = [mesh.part_names.get(int(p), f"part{p}") for p in np.unique(part)
                   if mesh.part_kinds.get(int(p), "muscle") == "bone"]
@@ -134,3 +135,52 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_
     if fibers == "laplace":
         scene.resolve_fibers()
     return scene
+
+
+def label_unlabelled_tets(tets, part, fiber=None, *, path="the mesh", warn=True):
+    """Give each unlabelled tet (a negative ``part``, as 7 tets of the authors'
+    realistic_biceps have) the labelled part that holds most of its vertices,
+    repeating until every tet has a part; a tet that joins a part gets the
+    normalised mean fibre of that part's tets sharing its vertices if its own is
+    zero. Warns (MeshWarning) with the count.
+
+    tets   (m, 4) vertex ids;  part  (m,) int labels;  fiber  (m, 3) or None
+    Returns (part, fiber), copies. A tet that shares no vertex with any labelled
+    tet is an error (label it in the mesh).
+    """
+    part = np.array(part, copy=True)
+    todo = np.flatnonzero(part < 0)
+    if len(todo) == 0:
+        return part, fiber
+    fiber = None if fiber is None else np.array(fiber, float, copy=True)
+    nv = int(tets.max()) + 1
+    joined = 0
+    while len(todo):
+        labelled = np.flatnonzero(part >= 0)
+        ids = np.unique(part[labelled])
+        # vertex_in[k, v]: vertex v belongs to a tet of part ids[k]
+        vertex_in = np.zeros((len(ids), nv), bool)
+        for k, pid in enumerate(ids):
+            vertex_in[k, tets[labelled[part[labelled] == pid]].ravel()] = True
+        progress = []
+        for t in (todo if len(ids) else []):
+            counts = vertex_in[:, tets[t]].sum(axis=1)
+            if counts.max() == 0:
+                continue
+            progress.append((t, ids[int(np.argmax(counts))]))
+        if not progress:
+            raise ValueError(f"{path}: {len(todo)} tet(s) have no part label and share no vertex with a labelled "
+                             "tet; label them in the mesh")
+        for t, pid in progress:
+            part[t] = pid
+            if fiber is not None and not np.any(fiber[t]):
+                share = np.flatnonzero((part == pid) & np.isin(tets, tets[t]).any(axis=1))
+                u = fiber[share].sum(axis=0)
+                if np.linalg.norm(u) > 0:
+                    fiber[t] = u / np.linalg.norm(u)
+        joined += len(progress)
+        todo = np.flatnonzero(part < 0)
+    if warn:
+        warnings.warn(f"{path}: {joined} tet(s) had no part label; each joined the part holding most of its "
+                      "vertices", MeshWarning, stacklevel=3)
+    return part, fiber
