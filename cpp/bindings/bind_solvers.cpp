@@ -19,7 +19,8 @@ SolverOptions with_interrupt(SolverOptions o) {
   return o;
 }
 
-// Run a solve without the GIL; re-raise the KeyboardInterrupt it stopped for.
+// Run a solve without the GIL; re-raise the KeyboardInterrupt it stopped for,
+// or the exception an on_iteration callback raised.
 template <class F>
 SolveResult run_solve(F&& f) {
   SolveResult r;
@@ -27,9 +28,43 @@ SolveResult run_solve(F&& f) {
     py::gil_scoped_release release;
     r = f();
   }
-  if (r.status == "interrupted" && PyErr_Occurred()) throw py::error_already_set();
+  if (PyErr_Occurred()) throw py::error_already_set();
   return r;
 }
+
+py::dict record_dict(const IterationRecord& e) {
+  py::dict d;
+  d["iteration"] = e.iteration;
+  d["energy"] = e.energy;
+  d["grad_norm"] = e.grad_norm;
+  d["step"] = e.step;
+  d["time_s"] = e.time_s;
+  d["cg_iterations"] = e.cg_iterations;
+  d["backtracks"] = e.backtracks;
+  return d;
+}
+
+// A Python on_iteration(record: dict, positions: (n, 3) array) -> truthy to
+// stop, called with the GIL held. An exception it raises stops the solve and
+// is re-raised by run_solve (it never crosses the C++ solver).
+template <class Solver>
+struct IterationCallbackScope {
+  Solver& solver;
+  IterationCallbackScope(Solver& s, const py::object& fn) : solver(s) {
+    if (fn.is_none()) return;
+    solver.set_on_iteration([fn](const IterationRecord& rec, const Eigen::MatrixX3d& x) {
+      py::gil_scoped_acquire gil;
+      if (PyErr_Occurred()) return true;  // an earlier call failed: stop
+      try {
+        return bool(py::bool_(fn(record_dict(rec), Eigen::MatrixX3d(x))));
+      } catch (py::error_already_set& e) {
+        e.restore();
+        return true;
+      }
+    });
+  }
+  ~IterationCallbackScope() { solver.set_on_iteration({}); }
+};
 Eigen::MatrixXd history_array(const SolveResult& r) {
   Eigen::MatrixXd h(r.history.size(), 7);
   for (size_t i = 0; i < r.history.size(); ++i) {
@@ -122,14 +157,19 @@ void bind_solvers(py::module_& m) {
            }),
            py::arg("model"), py::arg("options"))
       .def(
-          "solve", [](FemSolver& s, const LoadCase& l) { return run_solve([&] { return s.solve(l); }); },
-          py::arg("load"))
+          "solve",
+          [](FemSolver& s, const LoadCase& l, const py::object& cb) {
+            IterationCallbackScope<FemSolver> scope(s, cb);
+            return run_solve([&] { return s.solve(l); });
+          },
+          py::arg("load"), py::arg("on_iteration") = py::none())
       .def(
           "solve_from",
-          [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0) {
+          [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0, const py::object& cb) {
+            IterationCallbackScope<FemSolver> scope(s, cb);
             return run_solve([&] { return s.solve(l, &x0); });
           },
-          py::arg("load"), py::arg("x0"))
+          py::arg("load"), py::arg("x0"), py::arg("on_iteration") = py::none())
       .def("energy", &FemSolver::energy, py::arg("load"), py::arg("x"), gil())
       .def("gradient", &FemSolver::gradient, py::arg("load"), py::arg("x"), gil())
       .def("reduced_energy", &FemSolver::reduced_energy, py::arg("load"), py::arg("x0"), py::arg("z"), gil(),
@@ -157,14 +197,19 @@ void bind_solvers(py::module_& m) {
            }),
            py::arg("model"), py::arg("options"), py::arg("emu_options"))
       .def(
-          "solve", [](EmuSolver& s, const LoadCase& l) { return run_solve([&] { return s.solve(l); }); },
-          py::arg("load"))
+          "solve",
+          [](EmuSolver& s, const LoadCase& l, const py::object& cb) {
+            IterationCallbackScope<EmuSolver> scope(s, cb);
+            return run_solve([&] { return s.solve(l); });
+          },
+          py::arg("load"), py::arg("on_iteration") = py::none())
       .def(
           "solve_from",
-          [](EmuSolver& s, const LoadCase& l, const Eigen::MatrixXd& F0) {
+          [](EmuSolver& s, const LoadCase& l, const Eigen::MatrixXd& F0, const py::object& cb) {
+            IterationCallbackScope<EmuSolver> scope(s, cb);
             return run_solve([&] { return s.solve(l, &F0); });
           },
-          py::arg("load"), py::arg("F0"))
+          py::arg("load"), py::arg("F0"), py::arg("on_iteration") = py::none())
       .def("energy", &EmuSolver::energy, py::arg("load"), py::arg("F"), gil())
       .def("gradient", &EmuSolver::gradient, py::arg("load"), py::arg("F"), gil())
       .def("fit_positions", &EmuSolver::fit_positions, py::arg("load"), py::arg("F"), gil())

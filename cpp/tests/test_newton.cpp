@@ -38,6 +38,11 @@ struct ConvexProblem {
     x += s * d;
     return f(x);
   }
+  Eigen::MatrixX3d pos;
+  const Eigen::MatrixX3d& positions() {
+    pos = Eigen::Map<const Eigen::MatrixX3d>(x.data(), x.size() / 3, 3);  // (x only has to be a multiple of 3 long here)
+    return pos;
+  }
 };
 
 ConvexProblem make_problem(int n) {
@@ -108,6 +113,36 @@ TEST(newton_driver_reports_failures_caps_and_interrupts) {
     newton_minimize(p, SolverOptions(), 1e-3, Clock::now(), r);
     CHECK(r.converged && r.iterations == 0 && r.status.find("initial state") != std::string::npos);
   }
+}
+
+TEST(newton_driver_shows_every_iterate_and_stops_when_asked) {
+  ConvexProblem p = make_problem(6);
+  SolverOptions o;
+  std::vector<int> seen;
+  std::vector<double> first_coordinate;
+  o.on_iteration = [&](const IterationRecord& r, const Eigen::MatrixX3d& x) {
+    seen.push_back(r.iteration);
+    first_coordinate.push_back(x(0, 0));
+    return r.iteration == 3;
+  };
+  SolveResult r;
+  newton_minimize(p, o, 1e-14, Clock::now(), r);
+  CHECK(!r.converged && r.status == "stopped by on_iteration" && r.iterations == 3);
+  CHECK((seen == std::vector<int>{0, 1, 2, 3}));
+  CHECK_CLOSE(first_coordinate.back(), p.x(0), 0.0);
+  CHECK_CLOSE(first_coordinate.front(), -4.0, 0.0);
+  // a request to stop at the converged iterate changes nothing
+  ConvexProblem q = make_problem(6);
+  o.on_iteration = [](const IterationRecord&, const Eigen::MatrixX3d&) { return true; };
+  SolveResult r0;
+  SolverOptions plain;
+  ConvexProblem q0 = make_problem(6);
+  newton_minimize(q0, plain, 1e-14, Clock::now(), r0);
+  o.max_iterations = 1000;
+  SolveResult r1;
+  q.x = q0.x;  // start at the minimiser: converged at once, and the callback sees it
+  newton_minimize(q, o, 1e-3, Clock::now(), r1);
+  CHECK(r1.converged && r1.iterations == 0);
 }
 
 TEST(newton_driver_stalls_when_no_step_helps) {

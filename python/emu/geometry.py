@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["bbox_diagonal", "vertex_error", "deformation_gradients"]
+__all__ = ["error_history", "time_to_error", "bbox_diagonal", "vertex_error", "deformation_gradients"]
 
 
 def bbox_diagonal(points) -> float:
@@ -25,6 +25,31 @@ def vertex_error(a, b, points=None) -> float:
         raise ValueError(f"position arrays differ in shape: {pa.shape} vs {pb.shape}")
     diag = bbox_diagonal(pb if points is None else points)
     return float(np.linalg.norm(pa - pb, axis=1).max() / diag)
+
+
+def error_history(solution, reference, points=None) -> tuple:
+    """Error against run time of one solve: (time_s (k,), error (k,)) with the
+    vertex_error of every recorded iterate of ``solution`` (solved with
+    record_iterates=True) to ``reference`` ((n, 3) or a Solution, typically the
+    converged FEM answer), the start first."""
+    its = getattr(solution, "iterates", None)
+    if not its:
+        raise ValueError("the solution has no recorded iterates: solve with record_iterates=True")
+    ref = np.asarray(getattr(reference, "positions", reference))
+    pts = ref if points is None else points
+    t = np.array([ti for ti, _ in its])
+    e = np.array([vertex_error(x, ref, pts) for _, x in its])
+    return t, e
+
+
+def time_to_error(solution, reference, target: float, points=None) -> float:
+    """The solve time at which ``solution``'s iterates first come within
+    ``target`` vertex error of ``reference`` (and stay there); inf if never."""
+    t, e = error_history(solution, reference, points)
+    above = np.flatnonzero(e > target)
+    if len(above) == 0:
+        return float(t[0])
+    return float(t[above[-1] + 1]) if above[-1] + 1 < len(t) else float("inf")
 
 
 def deformation_gradients(rest: np.ndarray, tets: np.ndarray, x: np.ndarray) -> np.ndarray:

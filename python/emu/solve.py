@@ -35,6 +35,8 @@ class Solution:
     history     dict of per-iteration arrays (entry 0 is the start): energy,
                 grad_norm, time_s (since the solve began), step, cg_iterations, backtracks
     F           (m, 3, 3) EMU's deformation-gradient unknowns (None for FEM)
+    iterates    with solve(record_iterates=True): one (time_s, positions (n, 3))
+                per iterate, the start first (see emu.error_history)
     """
     method: str
     positions: np.ndarray
@@ -54,6 +56,7 @@ class Solution:
     filtered_steps: int = 0          # iterations that fell back to the PSD-filtered Hessian
     exact_attempts_failed: int = 0   # FEM: factorisations that found the exact Hessian indefinite
     neutral_modes: list = field(default_factory=list)  # [(bone, unit axis)] turns nothing resists
+    iterates: list | None = field(default=None, repr=False)
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
@@ -239,22 +242,39 @@ class Solver:
         return load
 
     def solve(self, activation=None, *, normalized: bool = False, gravity=None, pin_positions=None,
-              bone_poses=None, initial=None) -> Solution:
+              bone_poses=None, initial=None, on_iteration=None, record_iterates: bool = False) -> Solution:
         """Equilibrium under the given activations.
 
-        activation  {muscle: a} absolute activation (or in [0, 1] with normalized=True)
-        bone_poses  {bone: (R, t)} (or a 4x4 rigid transform) placing scripted bones at
-                    x = R X + t; bones not listed stay at rest
-        initial     warm start: a previous Solution of this solver (or, for FEM,
-                    (n, 3) positions; for EMU, (m, 3, 3) deformation gradients)
+        activation    {muscle: a} absolute activation (or in [0, 1] with normalized=True)
+        bone_poses    {bone: (R, t)} (or a 4x4 rigid transform) placing scripted bones at
+                      x = R X + t; bones not listed stay at rest
+        initial       warm start: a previous Solution of this solver (or, for FEM,
+                      (n, 3) positions; for EMU, (m, 3, 3) deformation gradients)
+        on_iteration  on_iteration(record, positions) is called with the start and
+                      every accepted iterate: record a dict (iteration, energy,
+                      grad_norm, step, time_s, cg_iterations, backtracks), positions
+                      (n, 3) (EMU: the fit of the iterate). A true return value stops
+                      the solve (status "stopped by on_iteration"); an exception it
+                      raises stops it and propagates.
+        record_iterates  keep (time_s, positions) of every iterate in Solution.iterates
         """
         load = self.load_case(activation, normalized, gravity, pin_positions, bone_poses)
         settings = dict(self.settings)
         settings["activation"] = dict(zip(self.scene.muscles, np.asarray(load.activation).tolist()))
+        iterates = [] if record_iterates else None
+        callback = None
+        if on_iteration is not None or record_iterates:
+            if on_iteration is not None and not callable(on_iteration):
+                raise TypeError(f"on_iteration must be callable, got {type(on_iteration).__name__}")
+
+            def callback(record, positions):
+                if iterates is not None:
+                    iterates.append((record["time_s"], positions))
+                return bool(on_iteration(record, positions)) if on_iteration is not None else False
         if initial is None:
-            r = self._core.solve(load)
+            r = self._core.solve(load, on_iteration=callback)
         else:
-            r = self._core.solve_from(load, self._initial_array(initial))
+            r = self._core.solve_from(load, self._initial_array(initial), on_iteration=callback)
         if not np.all(np.isfinite(r.positions)):
             raise FloatingPointError("the solver produced non-finite positions; this is a bug, please report it")
         h = np.asarray(r.history)
@@ -269,7 +289,7 @@ class Solver:
                         grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
                         history=history, F=F, settings=settings, filtered_steps=r.filtered_steps,
                         exact_attempts_failed=r.exact_attempts_failed,
-                        neutral_modes=self._neutral_modes(r))
+                        neutral_modes=self._neutral_modes(r), iterates=iterates)
 
     def _neutral_modes(self, r) -> list:
         bones = self.scene.movable_bones
@@ -298,7 +318,8 @@ class Solver:
 
 
 def solve(scene: Scene, activation=None, method: str = "emu", *, normalized: bool = False, gravity=None,
-          bone_poses=None, initial=None, **options) -> Solution:
+          bone_poses=None, initial=None, on_iteration=None, record_iterates: bool = False, **options) -> Solution:
     """Build a Solver for ``scene`` and solve once. options: see Solver."""
     return Solver(scene, method, **options).solve(activation, normalized=normalized, gravity=gravity,
-                                                  bone_poses=bone_poses, initial=initial)
+                                                  bone_poses=bone_poses, initial=initial, on_iteration=on_iteration,
+                                                  record_iterates=record_iterates)

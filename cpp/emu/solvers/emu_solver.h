@@ -42,6 +42,11 @@ class EmuSolver {
   ///     a bone's F is read from its first tet; nullptr: identity)
   SolveResult solve(const LoadCase& load, const Eigen::MatrixXd* F0 = nullptr);
 
+  /// Called with every iterate of the following solves (see SolverOptions::on_iteration); empty: none.
+  void set_on_iteration(std::function<bool(const IterationRecord&, const Eigen::MatrixX3d&)> f) {
+    options_.on_iteration = std::move(f);
+  }
+
   // The pieces, for tests and diagnostics. F, V, R: #unknowns by 9.
   // gradient / hessian_product are Euclidean (no tangent projection).
   double energy(const LoadCase& load, const Eigen::MatrixXd& F) const;

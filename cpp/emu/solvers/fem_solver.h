@@ -40,6 +40,11 @@ class FemSolver {
   void reduced_system(const LoadCase& load, const Eigen::MatrixX3d& x0, bool exact, Eigen::VectorXd& gradient,
                       Eigen::MatrixXd& hessian);
 
+  /// Called with every iterate of the following solves (see SolverOptions::on_iteration); empty: none.
+  void set_on_iteration(std::function<bool(const IterationRecord&, const Eigen::MatrixX3d&)> f) {
+    options_.on_iteration = std::move(f);
+  }
+
   double setup_seconds() const { return setup_seconds_; }
   const Model& model() const { return model_; }
   double factor_nnz() const { return factor_.factor_nnz(); }

@@ -2,7 +2,11 @@
 // Options of the FEM and EMU solvers.
 #include <functional>
 
+#include <Eigen/Core>
+
 namespace emu {
+
+struct IterationRecord;
 
 struct SolverOptions {
   int max_iterations = 500;
@@ -20,6 +24,10 @@ struct SolverOptions {
   // Polled once per iteration; returning true stops the solve with status
   // "interrupted" (the Python bindings use it for Ctrl-C).
   std::function<bool()> interrupted;
+  // Called with the record and the positions (#V by 3) of the start and of
+  // every accepted iterate; returning true stops the solve with status
+  // "stopped by on_iteration" (error-against-time curves, custom stopping).
+  std::function<bool(const IterationRecord&, const Eigen::MatrixX3d&)> on_iteration;
 };
 
 enum class EmuStep { Woodbury, NewtonKrylov };

@@ -15,6 +15,7 @@
 //   double trial_energy(double s);              // energy at step s along it (non-finite: rejected)
 //   double trial_grad_norm(double s);           // gradient norm there (round-off rule)
 //   double take_step(int iteration, double s, double E_trial);  // move; returns the new energy
+//   const Eigen::MatrixX3d& positions() const;  // #V by 3 (only for SolverOptions::on_iteration)
 #include <string>
 
 #include "emu/solvers/newton/convergence.h"
@@ -50,11 +51,19 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
   res.grad_norm0 = conv.g0;
   res.history.push_back({0, E, conv.g0, 0.0, seconds_since(t0), 0, 0});
   res.status = "max iterations reached";
+  // The caller sees every iterate (the start included); returning true stops
+  // a solve that has not converged.
+  auto stop_requested = [&] {
+    if (!o.on_iteration || !o.on_iteration(res.history.back(), p.positions()) || res.converged) return false;
+    res.status = "stopped by on_iteration";
+    return true;
+  };
   if (conv.initial()) {
     res.converged = true;
     res.status = "converged: initial state is in equilibrium";
   }
-  for (int it = 1; !res.converged && it <= o.max_iterations; ++it) {
+  bool stopped = stop_requested();
+  for (int it = 1; !res.converged && !stopped && it <= o.max_iterations; ++it) {
     if (o.interrupted && o.interrupted()) {
       res.status = "interrupted";
       break;
@@ -88,6 +97,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
       res.converged = true;
       res.status = "converged";
     }
+    stopped = stop_requested();
   }
   res.energy = E;
   res.grad_norm = res.history.back().grad_norm;
