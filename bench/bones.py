@@ -10,7 +10,6 @@ vertex error to FEM over the bounding-box diagonal, as a Markdown table.
 from __future__ import annotations
 
 import argparse
-import pathlib
 import time
 
 import numpy as np
@@ -18,15 +17,14 @@ import numpy as np
 import emu
 from emu.bones import bone_angle, bone_motion
 
-DATA = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def scenes(arm_res):
     yield ("simple_joint (bottom bone on the hinge)",
-           emu.io.load_scene(DATA / "simple_joint" / "simple_joint.vtu", free_bones=["bottom_bone"], warn=False),
+           emu.io.load_scene(emu.datasets.path("simple_joint"), free_bones=["bottom_bone"], warn=False),
            {"muscle": 1e4}, False, "bottom_bone")
     yield ("big_muscle (bone_2 free)",
-           emu.io.load_scene(DATA / "big_muscle" / "big_muscle.vtu", free_bones=["bone_2"], warn=False),
+           emu.io.load_scene(emu.datasets.path("big_muscle"), free_bones=["bone_2"], warn=False),
            {"muscle": 1e4}, False, "bone_2")
     for r in arm_res:
         yield (f"arm r={r} (forearm on the elbow hinge)", emu.scenes.arm(r), {"flexor": 0.45}, True, "forearm")

@@ -26,6 +26,7 @@ def main(argv=None):
     ap.add_argument("--woodbury-max-iterations", type=int, default=500)
     ap.add_argument("--alpha", type=float, default=100.0)
     ap.add_argument("--schur", action="store_true", help="include Newton-Krylov with the Schur preconditioner")
+    ap.add_argument("--skip-woodbury", action="store_true", help="do not run the paper's quasi-Newton step")
     a = ap.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     results = []
@@ -34,7 +35,7 @@ def main(argv=None):
             path = os.path.join(a.out, f"fusiform_{n}_t{t}.json")
             cmd = [sys.executable, os.path.join(HERE, "emu_vs_fem.py"), "--tets", str(n), "--threads", str(t),
                    "--alpha", str(a.alpha), "--woodbury-max-iterations", str(a.woodbury_max_iterations),
-                   "--json", path] + (["--schur"] if a.schur else [])
+                   "--json", path] + (["--schur"] if a.schur else []) + (["--skip-woodbury"] if a.skip_woodbury else [])
             print("+", " ".join(cmd), flush=True)
             subprocess.run(cmd, check=True)
             with open(path) as f:
