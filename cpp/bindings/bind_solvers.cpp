@@ -172,6 +172,19 @@ void bind_solvers(py::module_& m) {
           py::arg("load"), py::arg("x0"), py::arg("on_iteration") = py::none())
       .def("energy", &FemSolver::energy, py::arg("load"), py::arg("x"), gil())
       .def("gradient", &FemSolver::gradient, py::arg("load"), py::arg("x"), gil())
+      .def(
+          "newton_correction",
+          [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0, const std::string& hessian, int max_steps) {
+            FemSolver::CorrectionHessian h = FemSolver::CorrectionHessian::LowerEnergy;
+            if (hessian == "exact") h = FemSolver::CorrectionHessian::Exact;
+            else if (hessian == "filtered") h = FemSolver::CorrectionHessian::Filtered;
+            else if (hessian != "lower-energy")
+              throw std::invalid_argument("hessian must be 'lower-energy', 'exact' or 'filtered', got '" + hessian + "'");
+            py::gil_scoped_release release;
+            return s.newton_correction(l, x0, h, max_steps);
+          },
+          py::arg("load"), py::arg("x0"), py::arg("hessian") = "lower-energy", py::arg("max_steps") = 1,
+          "Positions after one full Newton step of the FEM energy from x0 (the linearised correction)")
       .def("reduced_energy", &FemSolver::reduced_energy, py::arg("load"), py::arg("x0"), py::arg("z"), gil(),
            "Energy at increment z of the reduced unknowns (free soft displacements, bone increments) about x0")
       .def(

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .geometry import bbox_diagonal
+from .geometry import bbox_diagonal, vertex_error
 from .lowering import build_model, declared_joint_rows, declared_joint_world
 from .poses import parse_pose
 from .runtime import set_threads
@@ -37,6 +37,11 @@ class Solution:
     F           (m, 3, 3) EMU's deformation-gradient unknowns (None for FEM)
     iterates    with solve(record_iterates=True): one (time_s, positions (n, 3))
                 per iterate, the start first (see emu.error_history)
+    error_estimate  EMU: the estimated vertex error to the converged FEM answer
+                (the measure of emu.vertex_error), from one Newton correction of
+                the FEM energy at EMU's positions (docs/DESIGN.md: how it was
+                validated); None for FEM, or where it is not available
+                (error_estimate_note says why)
     """
     method: str
     positions: np.ndarray
@@ -57,13 +62,19 @@ class Solution:
     exact_attempts_failed: int = 0   # FEM: factorisations that found the exact Hessian indefinite
     neutral_modes: list = field(default_factory=list)  # [(bone, unit axis)] turns nothing resists
     iterates: list | None = field(default=None, repr=False)
+    error_estimate: float | None = None
+    error_estimate_time_s: float = 0.0
+    error_estimate_note: str = ""
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
         state = "converged" if self.converged else f"NOT converged ({self.status})"
+        est = ""
+        if self.error_estimate is not None:
+            est = f", estimated error to FEM {self.error_estimate:.1e} of the diagonal"
         return (f"{self.label}: {state} in {self.iterations} iterations{cg}, "
                 f"{self.time_s:.3f} s (+{self.setup_time_s:.3f} s setup), |g|/|g0| = "
-                f"{self.grad_norm / self.grad_norm0 if self.grad_norm0 else 0:.2e}")
+                f"{self.grad_norm / self.grad_norm0 if self.grad_norm0 else 0:.2e}{est}")
 
     @property
     def label(self) -> str:
@@ -95,6 +106,11 @@ class Solver:
     bone_coarse_space  EMU with movable bones: add a coarse correction for the bones'
                   rotations to the preconditioner (fewer CG iterations; docs/DESIGN.md)
     threads       OpenMP and OpenBLAS threads (None: leave as is)
+    error_estimate  EMU: estimate every solve's error to FEM (Solution.error_estimate;
+                  one or two sparse factorisations of the FEM Hessian per
+                  correction step, its symbolic analysis once, at the first solve)
+    error_estimate_steps  at most this many Newton correction steps; a step
+                  after one that needed the PSD-filtered matrix (docs/DESIGN.md)
 
     fibers        (m, 3) the rest fibre direction per tet of the scene the model
                   was built with (emu.lowering.tet_fibers); the scene is not changed
@@ -104,7 +120,8 @@ class Solver:
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
                  max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "woodbury",
                  preconditioner_refresh: int = 3, bone_coarse_space: bool = True,
-                 exact_when_definite: bool = True, threads: int | None = None):
+                 exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
+                 error_estimate_steps: int = 2):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
@@ -149,6 +166,12 @@ class Solver:
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
                                  preconditioner=preconditioner if step == "newton-krylov" else None)
         self.setup_time_s = self._core.setup_seconds
+        self.error_estimate = bool(error_estimate) and method == "emu"
+        if int(error_estimate_steps) < 1:
+            raise ValueError(f"error_estimate_steps must be >= 1, got {error_estimate_steps}")
+        self.error_estimate_steps = int(error_estimate_steps)
+        self._estimator = None       # FEM's Newton system for the error estimate, built at first use
+        self._estimator_error = ""   # why there is none (a scene FEM does not handle)
 
     def activation_vector(self, activation=None, normalized: bool = False) -> np.ndarray:
         """Per-muscle absolute activations from a {muscle: value} dict (missing: 0)."""
@@ -283,13 +306,39 @@ class Solver:
         if self.method == "emu":
             F = np.tile(np.eye(3), (len(self.scene.tets), 1, 1))  # fixed-bone tets stay at identity
             F[self._model_tets] = np.asarray(r.F).reshape(-1, 3, 3).transpose(0, 2, 1)  # vec(F) column-major
-        return Solution(method=self.method, positions=np.asarray(r.positions), converged=bool(r.converged),
+        positions = np.asarray(r.positions)
+        estimate, estimate_s, note = (self._estimate_error(load, positions) if self.error_estimate
+                                      else (None, 0.0, ""))
+        return Solution(method=self.method, positions=positions, converged=bool(r.converged),
                         status=r.status, iterations=r.iterations, cg_iterations=r.cg_iterations,
                         time_s=r.time_s, setup_time_s=self.setup_time_s, energy=r.energy,
                         grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
                         history=history, F=F, settings=settings, filtered_steps=r.filtered_steps,
                         exact_attempts_failed=r.exact_attempts_failed,
-                        neutral_modes=self._neutral_modes(r), iterates=iterates)
+                        neutral_modes=self._neutral_modes(r), iterates=iterates, error_estimate=estimate,
+                        error_estimate_time_s=estimate_s, error_estimate_note=note)
+
+    def _estimate_error(self, load, positions) -> tuple:
+        """(estimate, seconds, note): EMU's vertex error to FEM, estimated by the
+        linearised correction x1 = x + dx of FEM's Newton step at EMU's positions
+        x (the step that lowers the FEM energy more of the exact and the
+        PSD-filtered Newton matrix): estimate = vertex_error(x, x1)."""
+        import time
+
+        t0 = time.perf_counter()
+        if self._estimator is None and not self._estimator_error:
+            opts = _core.SolverOptions()
+            try:
+                self._estimator = _core.FemSolver(self.model, opts)
+            except ValueError as e:   # e.g. a joint between two movable bones
+                self._estimator_error = f"no error estimate: {e}"
+        if self._estimator is None:
+            return None, 0.0, self._estimator_error
+        try:
+            x1 = np.asarray(self._estimator.newton_correction(load, positions, max_steps=self.error_estimate_steps))
+        except RuntimeError as e:
+            return None, time.perf_counter() - t0, f"no error estimate: {e}"
+        return vertex_error(positions, x1), time.perf_counter() - t0, ""
 
     def _neutral_modes(self, r) -> list:
         bones = self.scene.movable_bones

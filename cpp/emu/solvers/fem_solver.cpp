@@ -227,6 +227,22 @@ class FemSolver::Newton {
       s_.bones_.place(poses, x);
     }
   }
+  /// The direction of newton_correction: the exact Newton matrix where it is
+  /// definite (exact = true), or the PSD-filtered element Hessians with the
+  /// bones' exact rotation term where the bone Schur complement stays
+  /// definite (a bone turn is resisted only by that curvature), else filtered
+  /// throughout.
+  bool correction_direction(bool exact) {
+    s_.assemble_hessian(x_, act_, exact);
+    last_exact_ = exact;
+    if (newton_direction(true) && slope() < 0) return true;
+    last_exact_ = false;
+    s_.assemble_hessian(x_, act_, false);
+    return filtered_direction() && slope() < 0;
+  }
+  /// Whether the last correction_direction used the exact element Hessians.
+  bool last_direction_exact() const { return last_exact_; }
+
   /// Sets the direction directly (reduced_energy uses it).
   void set_direction(const Eigen::VectorXd& ds, const Eigen::VectorXd& db) {
     ds_ = ds;
@@ -290,7 +306,7 @@ class FemSolver::Newton {
   Eigen::VectorXd gs_, gb_, ds_, db_, y_;
   Eigen::MatrixXd Hsb_, Wsb_, Hbb_;
   double E_ = 0, gn_ = 0, last_step_ = 0;
-  bool last_exact_ok_ = true;
+  bool last_exact_ok_ = true, last_exact_ = false;
   std::vector<NeutralMode> neutral_, last_neutral_;  // of the current / last step
 };
 
@@ -305,6 +321,41 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   res.positions = newton.positions();
   res.time_s = seconds_since(t0);
   return res;
+}
+
+Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen::MatrixX3d& x0,
+                                              CorrectionHessian hessian, int max_steps) {
+  validate_load(model_, load);
+  if (max_steps < 1) throw std::invalid_argument("max_steps must be >= 1");
+  const Eigen::VectorXd act = tet_activation(model_, load);
+  Eigen::MatrixX3d x = x0;
+  for (int step = 0; step < max_steps; ++step) {
+    Newton newton(*this, load, act, &x);
+    Eigen::MatrixX3d x_exact, x_filtered;
+    BonePoses poses;
+    const bool exact = hessian != CorrectionHessian::Filtered;
+    if (!newton.correction_direction(exact))
+      throw std::runtime_error("no Newton correction from these positions: the Newton matrix is not positive "
+                               "definite");
+    bool used_exact = newton.last_direction_exact();
+    newton.step_positions(1.0, x_exact, poses);
+    // Both: the exact step where the exact matrix is definite (else the call
+    // above already fell back to the filtered one) and the filtered one; keep
+    // the step that lowers the FEM energy more.
+    if (hessian == CorrectionHessian::LowerEnergy && used_exact) {
+      const double E_exact = newton.trial_energy(1.0);
+      if (newton.correction_direction(false)) {
+        newton.step_positions(1.0, x_filtered, poses);
+        if (newton.trial_energy(1.0) < E_exact) {
+          x_exact.swap(x_filtered);
+          used_exact = false;
+        }
+      }
+    }
+    x.swap(x_exact);
+    if (used_exact) break;  // in Newton's regime: one step is the correction
+  }
+  return x;
 }
 
 double FemSolver::reduced_energy(const LoadCase& load, const Eigen::MatrixX3d& x0, const Eigen::VectorXd& z) {

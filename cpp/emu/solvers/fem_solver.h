@@ -30,6 +30,22 @@ class FemSolver {
   double energy(const LoadCase& load, const Eigen::MatrixX3d& x) const;
   Eigen::MatrixX3d gradient(const LoadCase& load, const Eigen::MatrixX3d& x) const;
 
+  /// Which Newton matrix newton_correction uses: the exact one (where it is
+  /// definite), the PSD-filtered one, or both and the step that ends at the
+  /// lower FEM energy (measured to estimate EMU's error best: docs/DESIGN.md).
+  enum class CorrectionHessian { Exact, Filtered, LowerEnergy };
+
+  /// Positions after full Newton steps of the FEM energy from x0 (#V by 3;
+  /// each bone first at the best rigid fit of its rows): the linearised
+  /// correction of an approximate equilibrium such as EMU's, whose distance to
+  /// x0 estimates x0's distance to the FEM equilibrium. A step that had to use
+  /// the filtered matrix (x0 is not yet in Newton's regime) is followed by
+  /// another, up to max_steps. One or two factorisations per step; throws
+  /// std::runtime_error if no Newton direction exists.
+  Eigen::MatrixX3d newton_correction(const LoadCase& load, const Eigen::MatrixX3d& x0,
+                                     CorrectionHessian hessian = CorrectionHessian::LowerEnergy,
+                                     int max_steps = 1);
+
   /// The Newton system in the solver's reduced unknowns z = (displacements of
   /// the free soft vertices, 3 #free; then the bone increments: exponential-map
   /// turns, translations of free bones) about the start state x0 (#V by 3; each

@@ -57,6 +57,7 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float = 100
                "emu_iterations": [f["iterations"] for f in log["frames"]],
                "emu_cg_iterations": [f["cg_iterations"] for f in log["frames"]],
                "all_converged": all(f["converged"] for f in log["frames"]),
+               "emu_error_estimate": [f["error_estimate"] for f in log["frames"]],
                "elbow_angle_deg": angle.tolist(), "time_s": times.tolist()}
     reference = None
     if compare_fem and done:
@@ -74,10 +75,16 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float = 100
         reference = {"FEM": fem_angle}
         summary.update(fem_solve_s=fem_s, fem_elbow_angle_deg=fem_angle.tolist(),
                        max_angle_difference_deg=float(np.abs(angle - fem_angle).max()),
-                       max_vertex_error=float(max(errors)))
+                       max_vertex_error=float(max(errors)), emu_vertex_error=[float(e) for e in errors])
         progress(f"  FEM {time.perf_counter() - t0:.1f} s; EMU vs FEM: elbow angle within "
                  f"{summary['max_angle_difference_deg']:.2f} degrees, vertex error <= "
                  f"{summary['max_vertex_error']:.2e} of the diagonal (alpha = {alpha:g} mu)")
+        est = [summary["emu_error_estimate"][k] for k in done]
+        ratios = [e / t for e, t in zip(est, errors) if e is not None and t > 1e-6]
+        if ratios:
+            summary["estimate_over_true"] = [float(min(ratios)), float(max(ratios))]
+            progress(f"  EMU's own error estimate (no FEM needed): max {max(e for e in est if e is not None):.2e}; "
+                     f"estimate / true error {min(ratios):.2f} to {max(ratios):.2f} over the frames")
     picks = sorted(set(np.linspace(0, len(done) - 1, min(8, len(done))).round().astype(int).tolist()))
     sheet = os.path.join(out, "contact_sheet.png")
     contact_sheet(sheet, scene, [kept[done[i]] for i in picks],

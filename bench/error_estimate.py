@@ -1,0 +1,81 @@
+"""Validate EMU's error estimate (Solution.error_estimate) against the true
+error to the converged FEM answer, over scenes and alpha.
+
+For each scene: FEM to a tight tolerance (the reference), then EMU at each
+alpha; prints a Markdown table of the true vertex error, the estimate, their
+ratio (the target band is [0.5, 2]), EMU's solve time and the estimate's time.
+
+    python bench/error_estimate.py [--scenes fusiform simple_joint ...] [--alphas 10 30 100 300 1000]
+    python bench/error_estimate.py --variants ...   # estimate / true of each way to take the correction
+
+--variants adds, per case, estimate / true for one Newton step with the exact
+matrix (where definite, else filtered), with the filtered one, with the
+lower-energy one of both, and for up to two lower-energy steps (the default).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+
+import emu
+
+SCENES = {
+    "fusiform_r3": lambda: (emu.scenes.fusiform(3, warn=False), {"belly": 5e4}, False),
+    "arm_r3": lambda: (emu.scenes.arm(3), {"flexor": 0.45}, True),
+    "fusiform": lambda: (emu.scenes.fusiform(tets=20000, warn=False), {"belly": 5e4}, False),
+    "simple_joint": lambda: (emu.io.load_scene(emu.datasets.path("simple_joint"), warn=False), {"muscle": 1e4}, False),
+    "simple_joint_free": lambda: (emu.io.load_scene(emu.datasets.path("simple_joint"), free_bones=["bottom_bone"],
+                                                    warn=False), {"muscle": 1e4}, False),
+    "big_muscle_free": lambda: (emu.io.load_scene(emu.datasets.path("big_muscle"), free_bones=["bone_2"], warn=False),
+                                {"muscle": 1e4}, False),
+    "arm_r5": lambda: (emu.scenes.arm(5), {"flexor": 0.45}, True),
+    "neck_r2": lambda: (emu.scenes.neck(2), {"left_front": 0.5}, True),
+    "realistic_biceps": lambda: (emu.io.load_scene(emu.datasets.path("realistic_biceps"), free_bones=["forearm"],
+                                                   warn=False), {"biceps": 2e3}, False),
+}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scenes", nargs="*", default=[k for k in SCENES if k not in ("fusiform_r3", "arm_r3")])
+    ap.add_argument("--alphas", type=float, nargs="*", default=[10, 30, 100, 300, 1000])
+    ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--steps", type=int, default=2, help="error_estimate_steps (Newton correction steps at most)")
+    ap.add_argument("--variants", action="store_true", help="also the other ways to take the correction")
+    a = ap.parse_args(argv)
+    if a.threads:
+        emu.runtime.set_threads(a.threads)
+    warnings.simplefilter("ignore")
+    i = emu.info()
+    print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {i['omp_threads']}; {time.strftime('%Y-%m-%d')}; "
+          f"error_estimate_steps = {a.steps}")
+    print()
+    variants = [("exact", 1), ("filtered", 1), ("lower-energy", 1), ("lower-energy", 2)] if a.variants else []
+    extra = "".join(f" {h} x{k} |" for h, k in variants)
+    print("| scene | tets | alpha / mu | true error | estimate | estimate / true | EMU solve s | estimate s |" + extra)
+    print("|---|---|---|---|---|---|---|---|" + "---|" * len(variants))
+    outside = 0
+    for name in a.scenes:
+        scene, act, normalized = SCENES[name]()
+        fem_solver = emu.Solver(scene, "fem", rtol_grad=1e-9)
+        fem = fem_solver.solve(act, normalized=normalized)
+        load = fem_solver.load_case(act, normalized=normalized)
+        for alpha in a.alphas:
+            sol = emu.Solver(scene, "emu", alpha=alpha, error_estimate_steps=a.steps).solve(act, normalized=normalized)
+            true = emu.vertex_error(sol, fem)
+            est = sol.error_estimate
+            ratio = est / true if est is not None and true > 0 else float("nan")
+            outside += not (0.5 <= ratio <= 2)
+            cols = ""
+            for h, k in variants:
+                x1 = fem_solver._core.newton_correction(load, sol.positions, h, k)
+                cols += f" {emu.vertex_error(sol.positions, x1) / true:.2f} |"
+            print(f"| {name} | {len(scene.tets)} | {alpha:g} | {true:.2e} | "
+                  f"{'-' if est is None else f'{est:.2e}'} | {ratio:.2f} | {sol.time_s:.2f} | "
+                  f"{sol.error_estimate_time_s:.2f} |" + cols, flush=True)
+    print(f"\n{outside} case(s) outside [0.5, 2]")
+
+
+if __name__ == "__main__":
+    main()

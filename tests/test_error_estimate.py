@@ -1,0 +1,80 @@
+"""EMU's error estimate (Solution.error_estimate): the linearised FEM correction
+at EMU's positions, against the true vertex error to the converged FEM answer
+on small scenes over two decades of alpha (the full table over the shipped
+scenes is bench/error_estimate.py, quoted in docs/DESIGN.md)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import emu
+from emu.scenes import arm, fusiform, neck
+
+SCENES = {
+    "fusiform (pinned, tendons)": (lambda: fusiform(2, warn=False), {"belly": 5e4}, False),
+    "arm (forearm on a hinge)": (lambda: arm(1), {"flexor": 0.4}, True),
+    "neck (head on a ball joint)": (lambda: neck(1), {"left_front": 0.5}, True),
+}
+
+
+@pytest.fixture(scope="module", params=list(SCENES))
+def case(request):
+    make, act, normalized = SCENES[request.param]
+    scene = make()
+    fem = emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized)
+    assert fem.converged
+    return scene, act, normalized, fem
+
+
+@pytest.mark.parametrize("alpha", [10.0, 100.0, 1000.0])
+def test_estimate_is_within_a_factor_two_of_the_true_error(case, alpha):
+    scene, act, normalized, fem = case
+    sol = emu.Solver(scene, "emu", alpha=alpha).solve(act, normalized=normalized)
+    assert sol.converged, sol.status
+    true = emu.vertex_error(sol, fem)
+    assert true > 1e-5          # EMU differs from FEM: there is an error to estimate
+    assert sol.error_estimate is not None, sol.error_estimate_note
+    assert 0.5 <= sol.error_estimate / true <= 2.0, (sol.error_estimate, true)
+    assert sol.error_estimate_time_s > 0
+    assert "estimated error to FEM" in sol.summary()
+
+
+def test_estimate_follows_the_error_down_as_alpha_grows(case):
+    scene, act, normalized, fem = case
+    est = [emu.Solver(scene, "emu", alpha=a).solve(act, normalized=normalized).error_estimate for a in (10, 1000)]
+    assert est[1] < 0.5 * est[0]
+
+
+def test_no_estimate_for_fem_or_when_switched_off():
+    s = fusiform(2, warn=False)
+    assert emu.solve(s, {"belly": 5e4}, "fem").error_estimate is None
+    off = emu.solve(s, {"belly": 5e4}, "emu", error_estimate=False)
+    assert off.error_estimate is None and off.error_estimate_time_s == 0.0
+
+
+def test_no_estimate_where_fem_cannot_solve_the_scene_says_why():
+    pts, tets, lab = emu.meshes.block_mesh(
+        {"a": [(0, 0)], "b": [(1, 1)], "c": [(2, 2)], "m1": [(0, 1)], "m2": [(1, 2)], "m3": [(2, 1), (1, 0)]}, 1)
+    s = emu.Scene(pts, tets)
+    s.add_bone("a", lab == 0)
+    s.add_bone("b", lab == 1, fixed=False)
+    s.add_bone("c", lab == 2, fixed=False)
+    for i, name in enumerate(("m1", "m2", "m3")):
+        s.add_muscle(name, lab == 3 + i, [1, 1, 0])
+    sol = emu.Solver(s, "emu").solve({"m1": 0.2}, normalized=True)
+    assert sol.converged and sol.error_estimate is None
+    assert "two movable bones" in sol.error_estimate_note
+
+
+def test_correction_hessian_choices():
+    """The estimate's step is the lower-energy one of the exact and filtered
+    Newton steps: its FEM energy is at most either's."""
+    s = fusiform(2, warn=False)
+    fs = emu.Solver(s, "fem")
+    load = fs.load_case({"belly": 5e4})
+    x = emu.solve(s, {"belly": 5e4}, "emu", alpha=100.0).positions
+    E = {h: fs._core.energy(load, fs._core.newton_correction(load, x, h)) for h in ("exact", "filtered", "lower-energy")}
+    assert E["lower-energy"] == min(E["exact"], E["filtered"])
+    assert E["lower-energy"] < fs._core.energy(load, x)
+    with pytest.raises(ValueError, match="hessian must be"):
+        fs._core.newton_correction(load, x, "dense")
