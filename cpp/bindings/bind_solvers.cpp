@@ -108,6 +108,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("rtol_grad", &SolverOptions::rtol_grad)
       .def_readwrite("rtol_energy", &SolverOptions::rtol_energy)
       .def_readwrite("armijo", &SolverOptions::armijo)
+      .def_readwrite("step_tol", &SolverOptions::step_tol)
       .def_readwrite("max_backtracks", &SolverOptions::max_backtracks)
       .def_readwrite("eigen_filter", &SolverOptions::eigen_filter)
       .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite);
@@ -237,7 +238,7 @@ void bind_solvers(py::module_& m) {
       .def_property_readonly("modes", &EmuSolver::modes)
       .def_property_readonly("num_unknowns", &EmuSolver::num_unknowns)
       .def_property_readonly("tet_unknown", &EmuSolver::tet_unknown, "#T: the F unknown each tet uses (soft tets in order, then one per movable bone)")
-      .def_property_readonly("alpha", &EmuSolver::alpha)
+      .def_property("alpha", &EmuSolver::alpha, &EmuSolver::set_alpha, "absolute alpha (settable between solves)")
       .def_property_readonly("factor_seconds", &EmuSolver::factor_seconds)
       .def_property_readonly("modes_seconds", &EmuSolver::modes_seconds)
       .def_property_readonly("setup_seconds", &EmuSolver::setup_seconds)

@@ -63,6 +63,13 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   tet_energy_.resize(model_.tets.rows());
 }
 
+void EmuSolver::set_alpha(double alpha) {
+  if (!(alpha > 0) || !std::isfinite(alpha)) throw std::invalid_argument("alpha must be positive and finite");
+  emu_.alpha = alpha;
+  woodbury_->set_alpha(alpha);
+  if (schur_) schur_->set_alpha(alpha);
+}
+
 EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   validate_load(model_, load);
   Context c;

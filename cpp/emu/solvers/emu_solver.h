@@ -68,6 +68,9 @@ class EmuSolver {
 
   int modes() const { return woodbury_->k(); }
   double alpha() const { return emu_.alpha; }
+  /// A new (absolute) alpha for the following solves: nothing is refactorised
+  /// (the ACAP matrix and its modes do not depend on alpha).
+  void set_alpha(double alpha);
   double factor_seconds() const { return factor_seconds_; }
   double modes_seconds() const { return modes_seconds_; }
   double setup_seconds() const { return factor_seconds_ + modes_seconds_; }

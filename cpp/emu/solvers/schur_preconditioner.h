@@ -28,6 +28,8 @@ class SchurPreconditioner {
   void apply(const Mat9X& r, Mat9X& out) const;
 
   double factor_nnz() const { return factor_.factor_nnz(); }
+  /// A new alpha for the following update() calls.
+  void set_alpha(double alpha) { alpha_ = alpha; }
 
  private:
   const Model& model_;

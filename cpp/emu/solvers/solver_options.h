@@ -13,6 +13,10 @@ struct SolverOptions {
   // Convergence (both must hold, see newton/convergence.h):
   double rtol_grad = 1e-6;     // |g_k| <= rtol_grad |g_0|
   double rtol_energy = 1e-10;  // E_{k-1} - E_k <= rtol_energy (E_0 - E_k)
+  // Converged also when a full step moves no vertex by more than step_tol
+  // (absolute, in position units; 0: off): the accuracy-matched stopping rule,
+  // for answers needed to a given vertex error rather than to round-off.
+  double step_tol = 0.0;
   double armijo = 1e-4;        // sufficient-decrease constant
   int max_backtracks = 40;     // step halvings before the line search gives up
   // Element Hessians: negative eigenvalues clamped (0) or reflected (1); see psd_project.h.

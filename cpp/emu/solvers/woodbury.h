@@ -42,6 +42,8 @@ class Woodbury {
   void apply(const Mat9X& r, Mat9X& out) const;
 
   int k() const { return 3 * ks_; }
+  /// A new alpha for the following update() calls (the modes do not depend on it).
+  void set_alpha(double alpha) { alpha_ = alpha; }
   /// Dense B (k x 9 #unknowns) and Lambda (k), for tests.
   Eigen::MatrixXd dense_B() const;
   Eigen::VectorXd lambda() const;

@@ -2,8 +2,9 @@
 
     emu demo [--out DIR] [--resolution R] [--frames N] [--alpha A] [--no-fem] [--threads T]
     emu compare [--out DIR] [--tets N] [--threads T] [--woodbury]
-    emu solve MESH --activation NAME=A [NAME=A ...] [--free-bones BONE ...] [--method emu|fem] [--out FILE.vtu]
-    emu run SCENE.toml [--out DIR]
+    emu solve MESH --activation NAME=A [NAME=A ...] [--free-bones BONE ...] [--method emu|fem] [--accuracy E]
+              [--out FILE.vtu]
+    emu run SCENE.toml [--out DIR] [--accuracy E]
     emu info [MESH]
     emu data [NAME ...]
 
@@ -174,6 +175,8 @@ def _solve(args):
     print(scene)
     act = _parse_activation(args.activation)
     kw = dict(alpha=args.alpha, step=args.step) if args.method == "emu" else {}
+    if args.accuracy is not None:
+        kw["accuracy"] = args.accuracy
     solver = Solver(scene, args.method, **kw)
     sol = solver.solve(act)
     print(sol.summary())
@@ -187,6 +190,8 @@ def _run(args):
     spec = load_scene_file(args.scene)
     if args.threads:
         spec.solver["threads"] = args.threads
+    if args.accuracy is not None:
+        spec.solver["accuracy"] = args.accuracy
     log = run_scene(spec, args.out)
     print(f"wrote {args.out or spec.output['dir']}: frame_*.vtu + series.pvd (ParaView), frame_*.obj (Blender), "
           "log.json")
@@ -222,6 +227,9 @@ def main(argv=None):
     s.add_argument("--method", choices=["emu", "fem"], default="emu")
     s.add_argument("--step", choices=["newton-krylov", "woodbury"], default="newton-krylov")
     s.add_argument("--alpha", type=float, default=100.0)
+    s.add_argument("--accuracy", type=float, default=None,
+                   help="vertex error to FEM wanted (0.01: 1%% of the diagonal): picks alpha, stops when steps no "
+                        "longer matter")
     s.add_argument("--threads", type=int, default=None)
     s.add_argument("--out", default=None, help="write the result here (.vtu)")
     s.set_defaults(func=_solve)
@@ -229,6 +237,8 @@ def main(argv=None):
     r.add_argument("scene")
     r.add_argument("--out", default=None, help="output folder (default: the scene's output.dir)")
     r.add_argument("--threads", type=int, default=None)
+    r.add_argument("--accuracy", type=float, default=None,
+                   help="override the scene file's solver.accuracy (vertex error to FEM wanted, e.g. 0.01)")
     r.set_defaults(func=_run)
     i = sub.add_parser("info", help="BLAS, threads; with a mesh or scene file: parts, attachments, defects, "
                                     "memory estimate")

@@ -30,7 +30,9 @@
 
     [solver]                     # any emu.Solver option
     method = "emu"               # or "fem"
-    alpha = 100.0
+    alpha = 100.0                # EMU's ACAP stiffness / mu (with accuracy: where its search starts)
+    accuracy = 0.01              # the vertex error to FEM wanted (1% of the diagonal): picks alpha
+                                 # and stops iterating when steps no longer matter (emu.Solver)
     modes = 24
     step = "newton-krylov"       # or "woodbury"
     rtol_grad = 1e-6
@@ -104,7 +106,7 @@ _SCHEMA = {
     "solver": {"method": str, "alpha": float, "modes": int, "step": str, "rtol_grad": float,
                "rtol_energy": float, "max_iterations": int, "cg_max_iterations": int, "preconditioner": str,
                "preconditioner_refresh": int, "exact_when_definite": bool, "threads": int,
-               "bone_coarse_space": bool},
+               "bone_coarse_space": bool, "accuracy": float, "error_estimate": bool},
     "frames": {"count": int, "dt": float},
     "activation": "table of tables",
     "bones": "table of tables",

@@ -63,6 +63,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     res.status = "converged: initial state is in equilibrium";
   }
   bool stopped = stop_requested();
+  Eigen::MatrixX3d x_prev;  // for the step_tol test
   for (int it = 1; !res.converged && !stopped && it <= o.max_iterations; ++it) {
     if (o.interrupted && o.interrupted()) {
       res.status = "interrupted";
@@ -88,6 +89,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
       ls.energy = E1;
     }
     const double E_prev = E;
+    if (o.step_tol > 0) x_prev = p.positions();
     E = p.take_step(it, ls.step, ls.energy);
     const double gn = p.grad_norm();
     res.iterations = it;
@@ -96,6 +98,12 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     if (conv.test(E_prev, E, gn)) {
       res.converged = true;
       res.status = "converged";
+    } else if (o.step_tol > 0 && ls.step == 1.0 &&
+               (p.positions() - x_prev).rowwise().norm().maxCoeff() <= o.step_tol) {
+      // A full Newton step this short: the remaining distance is about as
+      // short (Newton-Krylov converges at least linearly at rate <= 1/2).
+      res.converged = true;
+      res.status = "converged: a full step moved no vertex by more than step_tol";
     }
     stopped = stop_requested();
   }

@@ -1,0 +1,90 @@
+"""accuracy= as the knob: both methods stop when steps no longer matter at the
+target, EMU picks alpha from its error estimate; the true error to the
+converged FEM answer is within the target."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import emu
+from emu.scenes import arm, fusiform, neck
+
+CASES = {
+    "fusiform": (lambda: fusiform(2, warn=False), {"belly": 5e4}, False),
+    "arm": (lambda: arm(1), {"flexor": 0.4}, True),
+    "neck": (lambda: neck(1), {"left_front": 0.5}, True),
+}
+
+
+@pytest.fixture(scope="module", params=list(CASES))
+def case(request):
+    make, act, normalized = CASES[request.param]
+    scene = make()
+    fem = emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized)
+    return scene, act, normalized, fem
+
+
+@pytest.mark.parametrize("target", [0.01, 0.003])
+def test_emu_meets_the_accuracy_it_is_given(case, target):
+    scene, act, normalized, fem = case
+    solver = emu.Solver(scene, "emu", accuracy=target)
+    sol = solver.solve(act, normalized=normalized)
+    assert sol.converged, sol.status
+    assert emu.vertex_error(sol, fem) <= target
+    assert sol.error_estimate <= 0.6 * target
+    assert sol.settings["accuracy"] == target
+    assert solver.alpha <= sol.settings["alpha"]   # the next solve starts from this alpha or a lower one
+
+
+def test_emu_raises_alpha_where_the_default_misses_the_target():
+    s = fusiform(2, warn=False)
+    fem = emu.solve(s, {"belly": 5e4}, "fem", rtol_grad=1e-9)
+    plain = emu.solve(s, {"belly": 5e4}, "emu", alpha=100.0)
+    assert emu.vertex_error(plain, fem) > 0.005          # alpha = 100 mu misses 0.5% here
+    solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005)
+    sol = solver.solve({"belly": 5e4})
+    assert sol.settings["alpha_attempts"] >= 2 and solver.alpha > 100.0
+    assert emu.vertex_error(sol, fem) <= 0.005
+    # the next solve starts from the alpha found (a sequence's next frame)
+    again = solver.solve({"belly": 5e4}, initial=sol)
+    assert again.settings["alpha_attempts"] == 1 and emu.vertex_error(again, fem) <= 0.005
+
+
+def test_fem_stops_early_within_the_target(case):
+    scene, act, normalized, fem = case
+    strict = emu.Solver(scene, "fem").solve(act, normalized=normalized)
+    loose = emu.Solver(scene, "fem", accuracy=0.01).solve(act, normalized=normalized)
+    assert loose.converged and "step_tol" in loose.status
+    assert loose.iterations < strict.iterations
+    assert emu.vertex_error(loose, fem) <= 0.01
+
+
+def test_accuracy_checks_its_value_and_alpha_is_settable():
+    s = fusiform(2, warn=False)
+    for bad in (0.0, 1.5, float("nan"), "1%"):
+        with pytest.raises(ValueError, match="accuracy"):
+            emu.Solver(s, "emu", accuracy=bad)
+    solver = emu.Solver(s, "emu", alpha=100.0)
+    a = solver.solve({"belly": 5e4})
+    solver.set_alpha(1000.0)
+    b = solver.solve({"belly": 5e4})
+    c = emu.Solver(s, "emu", alpha=1000.0).solve({"belly": 5e4})
+    np.testing.assert_array_equal(b.positions, c.positions)     # as if built at that alpha
+    assert emu.vertex_error(a, b) > 1e-3
+    with pytest.raises(ValueError, match="EMU"):
+        emu.Solver(s, "fem").set_alpha(10.0)
+
+
+def test_scene_file_and_cli_accuracy(tmp_path):
+    from test_scenefile import GOOD, write
+    from emu.app.run import run_scene
+    from emu.app.scenefile import load_scene_file
+
+    spec = load_scene_file(write(tmp_path, GOOD.replace("alpha = 100.0", "alpha = 100.0\naccuracy = 0.01")))
+    assert spec.solver["accuracy"] == 0.01
+    log = run_scene(spec, str(tmp_path / "out"), progress=lambda *a: None)
+    assert all(f["converged"] for f in log["frames"]) and log["settings"]["accuracy"] == 0.01
+    assert all(f["error_estimate"] <= 0.006 for f in log["frames"])
+    bad = write(tmp_path, GOOD.replace("alpha = 100.0", 'alpha = 100.0\naccuracy = "1%"'), name="bad.toml")
+    with pytest.raises(emu.scenefile.SceneFileError, match="solver.accuracy"):
+        load_scene_file(bad)
