@@ -48,8 +48,9 @@ def test_estimate_follows_the_error_down_as_alpha_grows(case):
 def test_no_estimate_for_fem_or_when_switched_off():
     s = fusiform(2, warn=False)
     assert emu.solve(s, {"belly": 5e4}, "fem").error_estimate is None
-    off = emu.solve(s, {"belly": 5e4}, "emu", error_estimate=False)
+    off = emu.solve(s, {"belly": 5e4}, "emu", error_estimate=False)   # and so no default accuracy either
     assert off.error_estimate is None and off.error_estimate_time_s == 0.0
+    assert off.settings["accuracy"] is None
 
 
 def test_no_estimate_where_fem_cannot_solve_the_scene_says_why():

@@ -31,6 +31,8 @@ STEPS = ("newton-krylov", "woodbury")
 # term (ACCURACY_CG_FORCING; at 0.5, one CG iteration after a warm start at a
 # larger alpha passed the test while missing the bone's turn).
 ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS, ACCURACY_CG_FORCING = 0.6, 0.4, 0.1, 5, 0.01
+# EMU without alpha or accuracy: accuracy = DEFAULT_ACCURACY, starting at DEFAULT_ALPHA.
+DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
 HISTORY_COLUMNS = ("iteration", "energy", "grad_norm", "step", "time_s", "cg_iterations", "backtracks")
 
 
@@ -100,7 +102,10 @@ class Solver:
 
     method        "emu" or "fem"
     alpha         EMU's ACAP stiffness relative to the softest muscle's shear
-                  modulus (larger: closer to FEM, more iterations)
+                  modulus (larger: closer to FEM, more iterations). Given
+                  without ``accuracy``: fixed, and EMU iterates to the strict
+                  tolerance. Neither given: accuracy = 0.01 (the default for
+                  the Newton-Krylov step), alpha chosen for it starting at 100
     modes         k, number of ACAP modes in the Woodbury term (multiple of 3)
     step          "newton-krylov" (default) or "woodbury" (the paper's step)
     rtol_grad     stop when |g| <= rtol_grad |g_0| ...
@@ -120,7 +125,7 @@ class Solver:
     error_estimate_steps  at most this many Newton correction steps; a step
                   after one that needed the PSD-filtered matrix (docs/DESIGN.md)
     accuracy      the vertex error to FEM wanted, relative to the bounding-box
-                  diagonal (0.01: 1%), instead of a tolerance: both methods stop
+                  diagonal (0.01: 1%; EMU's default), instead of a tolerance: both methods stop
                   when a full Newton step moves no vertex by more than a tenth
                   of it; EMU also picks alpha (starting from ``alpha``) so that
                   its error estimate is within 0.6 x accuracy, re-solving
@@ -131,7 +136,7 @@ class Solver:
                   was built with (emu.lowering.tet_fibers); the scene is not changed
     """
 
-    def __init__(self, scene: Scene, method: str = "emu", *, alpha: float = 100.0, modes: int = 24,
+    def __init__(self, scene: Scene, method: str = "emu", *, alpha: float | None = None, modes: int = 24,
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
                  max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "woodbury",
                  preconditioner_refresh: int = 3, bone_coarse_space: bool = True,
@@ -141,6 +146,9 @@ class Solver:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
             raise ValueError(f"step must be one of {STEPS}, got {step!r}")
+        if method == "emu" and alpha is None and accuracy is None and step == "newton-krylov" and error_estimate:
+            accuracy = DEFAULT_ACCURACY   # the default: an answer within 1% of FEM's, alpha chosen for it
+        alpha = DEFAULT_ALPHA if alpha is None else alpha
         for name, v in (("alpha", alpha), ("rtol_grad", rtol_grad), ("rtol_energy", rtol_energy)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
@@ -321,15 +329,23 @@ class Solver:
         # p = 0.75 to raise (a retry where it is lower), p = 1 to lower.
         target = self.accuracy
         total_s, estimate_s, attempts = sol.time_s, sol.error_estimate_time_s, 1
-        while (sol.error_estimate is not None and sol.error_estimate > ACCEPT * target
+        iterations, cg, histories = sol.iterations, sol.cg_iterations, [sol.history]
+        while (sol.converged and sol.error_estimate is not None and sol.error_estimate > ACCEPT * target
                and attempts < MAX_ALPHA_ATTEMPTS):
             factor = min(30.0, max(1.5, (sol.error_estimate / (AIM * target)) ** (1 / 0.75)))
             self.set_alpha(self.alpha * factor)
             sol = self._solve_once(load, self._initial_array(sol), on_iteration, iterates, total_s)
+            sol.history["time_s"] = sol.history["time_s"] + total_s
+            histories.append(sol.history)
             total_s += sol.time_s
             estimate_s += sol.error_estimate_time_s
+            iterations += sol.iterations
+            cg += sol.cg_iterations
             attempts += 1
+        # totals over the solves at each alpha (history: one block per solve, times cumulative)
         sol.time_s, sol.error_estimate_time_s = total_s, estimate_s
+        sol.iterations, sol.cg_iterations = iterations, cg
+        sol.history = {k: np.concatenate([h[k] for h in histories]) for k in histories[0]}
         sol.settings["alpha_attempts"] = attempts
         if sol.error_estimate is not None and sol.error_estimate < AIM * target:
             self.set_alpha(max(self.alpha * 0.5, self.alpha * sol.error_estimate / (AIM * target)))

@@ -93,7 +93,7 @@ def _demo(args):
     if args.resolution < 1 or args.frames < 2:
         raise ValueError("--resolution must be >= 1 and --frames >= 2")
     summary = run_demo(args.out, resolution=args.resolution, frames=args.frames, alpha=args.alpha,
-                       compare_fem=not args.no_fem)
+                       compare_fem=not args.no_fem, accuracy=args.accuracy)
     return 0 if summary["all_converged"] else 1
 
 
@@ -208,7 +208,10 @@ def main(argv=None):
     d.add_argument("--out", default="emu_out", help="output folder (default: emu_out)")
     d.add_argument("--resolution", type=int, default=3, help="cells per arm block (default 3: 6.2k tets)")
     d.add_argument("--frames", type=int, default=25, help="frames over the 2 s sequence (default 25)")
-    d.add_argument("--alpha", type=float, default=100.0, help="EMU alpha relative to the muscles' shear modulus")
+    d.add_argument("--alpha", type=float, default=None,
+                   help="EMU alpha relative to the muscles' shear modulus, fixed (default: chosen for --accuracy)")
+    d.add_argument("--accuracy", type=float, default=None,
+                   help="vertex error to FEM wanted (default 0.01 unless --alpha is given)")
     d.add_argument("--no-fem", action="store_true", help="skip the FEM reference solves")
     d.add_argument("--threads", type=int, default=None)
     d.set_defaults(func=_demo)
@@ -226,7 +229,9 @@ def main(argv=None):
     s.add_argument("--activation", nargs="*", help="NAME=VALUE absolute activations")
     s.add_argument("--method", choices=["emu", "fem"], default="emu")
     s.add_argument("--step", choices=["newton-krylov", "woodbury"], default="newton-krylov")
-    s.add_argument("--alpha", type=float, default=100.0)
+    s.add_argument("--alpha", type=float, default=None,
+                   help="EMU alpha relative to the softest muscle's shear modulus, fixed (default: chosen for "
+                        "--accuracy, 0.01 unless --alpha is given)")
     s.add_argument("--accuracy", type=float, default=None,
                    help="vertex error to FEM wanted (0.01: 1%% of the diagonal): picks alpha, stops when steps no "
                         "longer matter")

@@ -27,21 +27,27 @@ from .scenefile import SceneSpec
 __all__ = ["demo_spec", "run_demo"]
 
 
-def demo_spec(resolution: int = 3, frames: int = 25, alpha: float = 100.0):
+def demo_spec(resolution: int = 3, frames: int = 25, alpha: float | None = None, accuracy: float | None = None):
     """The demo scene as a SceneSpec: 2 s, flexor up to 0.45 and back in the
-    first second, extensor up to 1.0 and back in the second."""
+    first second, extensor up to 1.0 and back in the second. EMU's default:
+    accuracy 0.01 (alpha chosen for it) unless alpha is given."""
     scene = arm(resolution)
     dt = 2.0 / (frames - 1)
     curves = {"flexor": Curve(keys=[[0.0, 0.0], [0.5, 0.45], [1.0, 0.0]], interpolation="smooth"),
               "extensor": Curve(keys=[[0.0, 0.0], [1.0, 0.0], [1.5, 1.0], [2.0, 0.0]], interpolation="smooth")}
-    return SceneSpec(scene=scene, solver={"method": "emu", "alpha": alpha}, frames=frames, dt=dt,
+    solver = {"method": "emu"}
+    if alpha is not None:
+        solver["alpha"] = alpha
+    if accuracy is not None:
+        solver["accuracy"] = accuracy
+    return SceneSpec(scene=scene, solver=solver, frames=frames, dt=dt,
                      curves=curves, source="built-in arm (emu.scenes.arm)")
 
 
-def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float = 100.0, compare_fem: bool = True,
-             progress=print) -> dict:
+def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float | None = None, compare_fem: bool = True,
+             progress=print, accuracy: float | None = None) -> dict:
     """Run the demo into ``out`` (see the module docstring); returns summary.json's contents."""
-    spec = demo_spec(resolution, frames, alpha)
+    spec = demo_spec(resolution, frames, alpha, accuracy)
     scene = spec.scene
     os.makedirs(out, exist_ok=True)
     progress(f"emu demo: procedural arm, {len(scene.tets)} tets, {len(scene.points)} vertices; humerus fixed, "
@@ -52,7 +58,11 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float = 100
     times = np.array([k * spec.dt for k in done])
     angle = np.array([log["frames"][k]["bone_angles_deg"]["forearm"] for k in done])
     acts = {m: np.array([spec.curves[m].value(k, k * spec.dt) for k in done]) for m in spec.curves}
-    summary = {"tets": len(scene.tets), "vertices": len(scene.points), "frames": len(done), "alpha": alpha,
+    alphas = [f["alpha"] for f in log["frames"]]
+    mode = (f"alpha = {alpha:g} mu" if alpha is not None and accuracy is None else
+            f"accuracy {log['settings'].get('accuracy'):g}, alpha {min(alphas):.0f}-{max(alphas):.0f} mu")
+    summary = {"tets": len(scene.tets), "vertices": len(scene.points), "frames": len(done), "alpha": alphas,
+               "accuracy": log["settings"].get("accuracy"),
                "emu_solve_s": float(sum(f["solve_s"] for f in log["frames"])),
                "emu_iterations": [f["iterations"] for f in log["frames"]],
                "emu_cg_iterations": [f["cg_iterations"] for f in log["frames"]],
@@ -78,7 +88,7 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float = 100
                        max_vertex_error=float(max(errors)), emu_vertex_error=[float(e) for e in errors])
         progress(f"  FEM {time.perf_counter() - t0:.1f} s; EMU vs FEM: elbow angle within "
                  f"{summary['max_angle_difference_deg']:.2f} degrees, vertex error <= "
-                 f"{summary['max_vertex_error']:.2e} of the diagonal (alpha = {alpha:g} mu)")
+                 f"{summary['max_vertex_error']:.2e} of the diagonal ({mode})")
         est = [summary["emu_error_estimate"][k] for k in done]
         ratios = [e / t for e, t in zip(est, errors) if e is not None and t > 1e-6]
         if ratios:
@@ -92,7 +102,7 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float = 100
                   activations=[{m: acts[m][i] for m in acts} for i in picks])
     plot = os.path.join(out, "elbow_angle.png")
     angle_activation_plot(plot, times, {"EMU": angle}, acts, reference=reference,
-                          title=f"arm demo: elbow angle (flexion > 0) and activation, alpha = {alpha:g} mu")
+                          title=f"arm demo: elbow angle (flexion > 0) and activation, {mode}")
     with open(os.path.join(out, "summary.json"), "w") as f:
         json.dump(summary, f, indent=2)
     progress(f"wrote {out}/: frame_*.vtu + series.pvd (ParaView), frame_*.obj (Blender), log.json, "

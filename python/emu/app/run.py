@@ -54,7 +54,8 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                                   "status": sol.status, "iterations": sol.iterations,
                                   "cg_iterations": sol.cg_iterations, "energy": sol.energy,
                                   "rel_grad_norm": sol.grad_norm / sol.grad_norm0 if sol.grad_norm0 else 0.0,
-                                  "solve_s": sol.time_s, "error_estimate": sol.error_estimate,
+                                  "solve_s": sol.time_s, "alpha": sol.settings.get("alpha"),
+                                  "error_estimate": sol.error_estimate,
                                   "error_estimate_s": sol.error_estimate_time_s})
             if on_frame is not None:
                 on_frame(k, sol)
