@@ -69,7 +69,7 @@ def main(argv=None):
             outside += not (0.5 <= ratio <= 2)
             cols = ""
             for h, k in variants:
-                x1 = fem_solver._core.newton_correction(load, sol.positions, h, k)
+                x1, _ = fem_solver._core.newton_correction(load, sol.positions, h, k)
                 cols += f" {emu.vertex_error(sol.positions, x1) / true:.2f} |"
             print(f"| {name} | {len(scene.tets)} | {alpha:g} | {true:.2e} | "
                   f"{'-' if est is None else f'{est:.2e}'} | {ratio:.2f} | {sol.time_s:.2f} | "

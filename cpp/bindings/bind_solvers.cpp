@@ -109,6 +109,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("rtol_energy", &SolverOptions::rtol_energy)
       .def_readwrite("armijo", &SolverOptions::armijo)
       .def_readwrite("step_tol", &SolverOptions::step_tol)
+      .def_readwrite("step_tol_grad", &SolverOptions::step_tol_grad)
       .def_readwrite("max_backtracks", &SolverOptions::max_backtracks)
       .def_readwrite("eigen_filter", &SolverOptions::eigen_filter)
       .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite);
@@ -181,11 +182,16 @@ void bind_solvers(py::module_& m) {
             else if (hessian == "filtered") h = FemSolver::CorrectionHessian::Filtered;
             else if (hessian != "lower-energy")
               throw std::invalid_argument("hessian must be 'lower-energy', 'exact' or 'filtered', got '" + hessian + "'");
-            py::gil_scoped_release release;
-            return s.newton_correction(l, x0, h, max_steps);
+            std::vector<double> steps;
+            Eigen::MatrixX3d x;
+            {
+              py::gil_scoped_release release;
+              x = s.newton_correction(l, x0, h, max_steps, &steps);
+            }
+            return py::make_tuple(x, steps);
           },
           py::arg("load"), py::arg("x0"), py::arg("hessian") = "lower-energy", py::arg("max_steps") = 1,
-          "Positions after one full Newton step of the FEM energy from x0 (the linearised correction)")
+          "(positions after the Newton correction steps from x0, the largest vertex displacement of each step)")
       .def("reduced_energy", &FemSolver::reduced_energy, py::arg("load"), py::arg("x0"), py::arg("z"), gil(),
            "Energy at increment z of the reduced unknowns (free soft displacements, bone increments) about x0")
       .def(

@@ -145,6 +145,27 @@ TEST(newton_driver_shows_every_iterate_and_stops_when_asked) {
   CHECK(r1.converged && r1.iterations == 0);
 }
 
+TEST(newton_driver_step_tolerance) {
+  ConvexProblem strict = make_problem(6);
+  SolveResult rs;
+  newton_minimize(strict, SolverOptions(), 1e-14, Clock::now(), rs);
+  // a full step shorter than step_tol stops the solve early, near the minimiser
+  ConvexProblem p = make_problem(6);
+  SolverOptions o;
+  o.step_tol = 0.05;
+  SolveResult r;
+  newton_minimize(p, o, 1e-14, Clock::now(), r);
+  CHECK(r.converged && r.status.find("step_tol") != std::string::npos);
+  CHECK(r.iterations < rs.iterations);
+  CHECK((p.x - strict.x).cwiseAbs().maxCoeff() <= 0.05);
+  // ... but not before the gradient has fallen to step_tol_grad of its start
+  ConvexProblem q = make_problem(6);
+  o.step_tol_grad = 1e-12;
+  SolveResult rq;
+  newton_minimize(q, o, 1e-14, Clock::now(), rq);
+  CHECK(rq.converged && rq.status == "converged" && rq.iterations == rs.iterations);
+}
+
 TEST(newton_driver_stalls_when_no_step_helps) {
   // An ascent "direction" that the problem claims is descent: no step lowers
   // the energy or the gradient, so the solve stops as stalled (never loops).

@@ -33,6 +33,8 @@ STEPS = ("newton-krylov", "woodbury")
 ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS, ACCURACY_CG_FORCING = 0.6, 0.4, 0.1, 5, 0.01
 # EMU without alpha or accuracy: accuracy = DEFAULT_ACCURACY, starting at DEFAULT_ALPHA.
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
+# ... and the step test applies once |g| <= STEP_GRAD |g_0| (measured: docs/DESIGN.md)
+STEP_GRAD = 1e-2
 HISTORY_COLUMNS = ("iteration", "energy", "grad_norm", "step", "time_s", "cg_iterations", "backtracks")
 
 
@@ -175,6 +177,7 @@ class Solver:
         opts.max_iterations = int(max_iterations)
         if self.accuracy is not None:
             opts.step_tol = STEP_FRACTION * self.accuracy * bbox_diagonal(scene.points)
+            opts.step_tol_grad = STEP_GRAD
         self.mu_ref = scene.reference_shear_modulus()
         self.settings = dict(method=method, rtol_grad=rtol_grad, rtol_energy=rtol_energy,
                              max_iterations=int(max_iterations), accuracy=self.accuracy)
@@ -413,7 +416,7 @@ class Solver:
         if self._estimator is None:
             return None, 0.0, self._estimator_error
         try:
-            x1 = np.asarray(self._estimator.newton_correction(load, positions, max_steps=self.error_estimate_steps))
+            x1, steps = self._estimator.newton_correction(load, positions, max_steps=self.error_estimate_steps)
         except RuntimeError as e:
             return None, time.perf_counter() - t0, f"no error estimate: {e}"
         return vertex_error(positions, x1), time.perf_counter() - t0, ""

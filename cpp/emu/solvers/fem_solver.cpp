@@ -324,7 +324,8 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
 }
 
 Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen::MatrixX3d& x0,
-                                              CorrectionHessian hessian, int max_steps) {
+                                              CorrectionHessian hessian, int max_steps,
+                                              std::vector<double>* step_sizes) {
   validate_load(model_, load);
   if (max_steps < 1) throw std::invalid_argument("max_steps must be >= 1");
   const Eigen::VectorXd act = tet_activation(model_, load);
@@ -352,6 +353,7 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
         }
       }
     }
+    if (step_sizes) step_sizes->push_back((x_exact - x).rowwise().norm().maxCoeff());
     x.swap(x_exact);
     if (used_exact) break;  // in Newton's regime: one step is the correction
   }

@@ -98,7 +98,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     if (conv.test(E_prev, E, gn)) {
       res.converged = true;
       res.status = "converged";
-    } else if (o.step_tol > 0 && ls.step == 1.0 &&
+    } else if (o.step_tol > 0 && ls.step == 1.0 && gn <= o.step_tol_grad * conv.g0 &&
                (p.positions() - x_prev).rowwise().norm().maxCoeff() <= o.step_tol) {
       // A full Newton step this short: the remaining distance is about as
       // short (Newton-Krylov converges at least linearly at rate <= 1/2).
