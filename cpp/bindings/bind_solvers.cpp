@@ -245,6 +245,8 @@ void bind_solvers(py::module_& m) {
       .def_property_readonly("num_unknowns", &EmuSolver::num_unknowns)
       .def_property_readonly("tet_unknown", &EmuSolver::tet_unknown, "#T: the F unknown each tet uses (soft tets in order, then one per movable bone)")
       .def_property("alpha", &EmuSolver::alpha, &EmuSolver::set_alpha, "absolute alpha (settable between solves)")
+      .def_property("cg_forcing_max", &EmuSolver::cg_forcing_max, &EmuSolver::set_cg_forcing_max,
+                    "Eisenstat-Walker cap on the CG forcing term (settable between solves)")
       .def_property_readonly("factor_seconds", &EmuSolver::factor_seconds)
       .def_property_readonly("modes_seconds", &EmuSolver::modes_seconds)
       .def_property_readonly("setup_seconds", &EmuSolver::setup_seconds)

@@ -27,9 +27,9 @@ STEPS = ("newton-krylov", "woodbury")
 # target (the estimate was measured at 0.65-1.13 x the true error), aim new
 # alphas at AIM x the target; stop iterating when a full step moves no vertex
 # by more than STEP_FRACTION x the target (measured: docs/DESIGN.md).
-# The step test needs steps that are Newton steps: CG to a tighter forcing
-# term (ACCURACY_CG_FORCING; at 0.5, one CG iteration after a warm start at a
-# larger alpha passed the test while missing the bone's turn).
+# The step test needs steps that are Newton steps: after a warm start at a
+# larger alpha, CG to a tighter forcing term (ACCURACY_CG_FORCING; at 0.5, one
+# CG iteration there passed the test while missing the bone's turn).
 ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS, ACCURACY_CG_FORCING = 0.6, 0.4, 0.1, 5, 0.01
 # EMU without alpha or accuracy: accuracy = DEFAULT_ACCURACY, starting at DEFAULT_ALPHA.
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
@@ -196,8 +196,6 @@ class Solver:
                 raise ValueError(f"preconditioner must be 'woodbury' or 'schur', got {preconditioner!r}")
             eo.preconditioner = getattr(_core.EmuPreconditioner, preconditioner)
             eo.bone_coarse_space = bool(bone_coarse_space)
-            if self.accuracy is not None:
-                eo.cg_forcing_max = min(eo.cg_forcing_max, ACCURACY_CG_FORCING)
             self._core = _core.EmuSolver(self.model, opts, eo)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
                                  preconditioner=preconditioner if step == "newton-krylov" else None)
@@ -337,7 +335,14 @@ class Solver:
                and attempts < MAX_ALPHA_ATTEMPTS):
             factor = min(30.0, max(1.5, (sol.error_estimate / (AIM * target)) ** (1 / 0.75)))
             self.set_alpha(self.alpha * factor)
-            sol = self._solve_once(load, self._initial_array(sol), on_iteration, iterates, total_s)
+            # a warm start at a larger alpha: CG to the tight forcing term, so
+            # that the step test sees Newton steps (docs/DESIGN.md)
+            eta_max = self._core.cg_forcing_max
+            self._core.cg_forcing_max = min(eta_max, ACCURACY_CG_FORCING)
+            try:
+                sol = self._solve_once(load, self._initial_array(sol), on_iteration, iterates, total_s)
+            finally:
+                self._core.cg_forcing_max = eta_max
             sol.history["time_s"] = sol.history["time_s"] + total_s
             histories.append(sol.history)
             total_s += sol.time_s

@@ -70,6 +70,11 @@ void EmuSolver::set_alpha(double alpha) {
   if (schur_) schur_->set_alpha(alpha);
 }
 
+void EmuSolver::set_cg_forcing_max(double eta_max) {
+  if (!(eta_max > 0 && eta_max < 1)) throw std::invalid_argument("cg_forcing_max must lie in (0, 1)");
+  emu_.cg_forcing_max = eta_max;
+}
+
 EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   validate_load(model_, load);
   Context c;

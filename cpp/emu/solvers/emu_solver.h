@@ -71,6 +71,9 @@ class EmuSolver {
   /// A new (absolute) alpha for the following solves: nothing is refactorised
   /// (the ACAP matrix and its modes do not depend on alpha).
   void set_alpha(double alpha);
+  /// The Eisenstat-Walker cap eta_max for the following solves (0 < eta_max < 1).
+  void set_cg_forcing_max(double eta_max);
+  double cg_forcing_max() const { return emu_.cg_forcing_max; }
   double factor_seconds() const { return factor_seconds_; }
   double modes_seconds() const { return modes_seconds_; }
   double setup_seconds() const { return factor_seconds_ + modes_seconds_; }

@@ -1,0 +1,53 @@
+"""The benchmark scripts run (small versions: the full runs are outside CI and
+their results are in bench/README.md)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+def run(*args, timeout=600):
+    r = subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return r.stdout
+
+
+def test_scaling_small(tmp_path):
+    out = run(BENCH / "scaling.py", "--fusiform", "1500", "3000", "--arm", "1", "--out", tmp_path)
+    rows = json.loads((tmp_path / "scaling.json").read_text())
+    assert {(r["scene"], r["method"]) for r in rows} == {("fusiform", "fem"), ("fusiform", "emu"),
+                                                         ("arm", "fem"), ("arm", "emu")}
+    for r in rows:
+        assert r["converged"] and r["peak_rss_mb"] > 0 and r["to_1pct_s"] <= r["to_converged_s"] + 1e-9
+        assert r["error"] <= 0.01 + 1e-12          # EMU's default accuracy; FEM is the reference itself
+    assert (tmp_path / "scaling.png").stat().st_size > 10000
+    assert "log-log slopes" in out
+
+
+def test_error_vs_time_small(tmp_path):
+    out = run(BENCH / "error_vs_time.py", "--scenes", "fusiform_r3", "--alphas", "10", "1000", "--modes", "12",
+              "--out", tmp_path)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    s = summary["fusiform_r3"]
+    assert set(s["curves"]) == {"FEM", "EMU alpha 10 k 24", "EMU alpha 1000 k 24", "EMU alpha 300 k 12"}
+    # alpha = 10 mu never reaches 0.5% (its own error is about 3%); FEM does
+    t, e = s["curves"]["EMU alpha 10 k 24"]
+    assert min(e) > 0.005 and s["fem"][2] < float("inf")
+    assert (tmp_path / "fusiform_r3.png").stat().st_size > 10000
+    assert "| fusiform_r3 |" in out
+
+
+def test_error_estimate_small():
+    out = run(BENCH / "error_estimate.py", "--scenes", "fusiform_r3", "--alphas", "100", "--variants")
+    assert "0 case(s) outside [0.5, 2]" in out
+
+
+def test_accuracy_small():
+    out = run(BENCH / "accuracy.py", "--scenes", "fusiform_r3", "--fractions", "0.1")
+    assert "| fusiform_r3 | fem |" in out and "| fusiform_r3 | " in out.split("against the strict")[1]
