@@ -29,6 +29,8 @@ SCENES = {
                                                     warn=False), {"muscle": 1e4}, False),
     "big_muscle_free": lambda: (emu.io.load_scene(emu.datasets.path("big_muscle"), free_bones=["bone_2"], warn=False),
                                 {"muscle": 1e4}, False),
+    "big_muscle_isometric": lambda: (emu.io.load_scene(emu.datasets.path("big_muscle"), warn=False),
+                                     {"muscle": 2e4}, False),
     "arm_r5": lambda: (emu.scenes.arm(5), {"flexor": 0.45}, True),
     "neck_r2": lambda: (emu.scenes.neck(2), {"left_front": 0.5}, True),
     "realistic_biceps": lambda: (emu.io.load_scene(emu.datasets.path("realistic_biceps"), free_bones=["forearm"],
