@@ -323,6 +323,12 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   return res;
 }
 
+namespace {
+// newton_correction: the gradient reduction of an exact step that counts as
+// Newton's regime (measured: docs/DESIGN.md, "EMU's error estimate").
+constexpr double kCorrectionContraction = 0.1;
+}  // namespace
+
 Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen::MatrixX3d& x0,
                                               CorrectionHessian hessian, int max_steps,
                                               std::vector<double>* step_sizes) {
@@ -343,7 +349,11 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
     // Both: the exact step where the exact matrix is definite (else the call
     // above already fell back to the filtered one) and the filtered one; keep
     // the step that lowers the FEM energy more.
-    if (hessian == CorrectionHessian::LowerEnergy && used_exact) {
+    // An exact step that cuts the gradient tenfold is in Newton's regime and
+    // kept as it is (one factorisation); otherwise the filtered one competes.
+    const bool newton_regime =
+        used_exact && newton.trial_grad_norm(1.0) <= kCorrectionContraction * newton.grad_norm();
+    if (hessian == CorrectionHessian::LowerEnergy && used_exact && !newton_regime) {
       const double E_exact = newton.trial_energy(1.0);
       if (newton.correction_direction(false)) {
         newton.step_positions(1.0, x_filtered, poses);
