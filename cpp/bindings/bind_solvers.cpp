@@ -182,16 +182,11 @@ void bind_solvers(py::module_& m) {
             else if (hessian == "filtered") h = FemSolver::CorrectionHessian::Filtered;
             else if (hessian != "lower-energy")
               throw std::invalid_argument("hessian must be 'lower-energy', 'exact' or 'filtered', got '" + hessian + "'");
-            std::vector<double> steps;
-            Eigen::MatrixX3d x;
-            {
-              py::gil_scoped_release release;
-              x = s.newton_correction(l, x0, h, max_steps, &steps);
-            }
-            return py::make_tuple(x, steps);
+            py::gil_scoped_release release;
+            return s.newton_correction(l, x0, h, max_steps);
           },
           py::arg("load"), py::arg("x0"), py::arg("hessian") = "lower-energy", py::arg("max_steps") = 1,
-          "(positions after the Newton correction steps from x0, the largest vertex displacement of each step)")
+          "Positions after the Newton correction steps of the FEM energy from x0")
       .def("reduced_energy", &FemSolver::reduced_energy, py::arg("load"), py::arg("x0"), py::arg("z"), gil(),
            "Energy at increment z of the reduced unknowns (free soft displacements, bone increments) about x0")
       .def(

@@ -23,7 +23,7 @@ struct ConvexProblem {
   double energy() const { return f(x); }
   double grad_norm() const { return grad(x).norm(); }
   SearchDirection direction(int it) {
-    if (it == fail_iteration) return SearchDirection::failed("test failure");
+    if (it == fail_iteration) return SearchDirection().fail("test failure");
     Eigen::MatrixXd H = Q;
     H.diagonal() += Eigen::VectorXd(x.array().exp());
     g = grad(x);
@@ -32,8 +32,12 @@ struct ConvexProblem {
     dir.slope = g.dot(d);
     return dir;
   }
-  double trial_energy(double s) const { return f(x + s * d); }
-  double trial_grad_norm(double s) const { return grad(x + s * d).norm(); }
+  double last_s = 0;
+  double trial_energy(double s) {
+    last_s = s;
+    return f(x + s * d);
+  }
+  double trial_grad_norm() const { return grad(x + last_s * d).norm(); }
   double take_step(int, double s, double) {
     x += s * d;
     return f(x);

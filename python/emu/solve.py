@@ -421,7 +421,7 @@ class Solver:
         if self._estimator is None:
             return None, 0.0, self._estimator_error
         try:
-            x1, steps = self._estimator.newton_correction(load, positions, max_steps=self.error_estimate_steps)
+            x1 = self._estimator.newton_correction(load, positions, max_steps=self.error_estimate_steps)
         except RuntimeError as e:
             return None, time.perf_counter() - t0, f"no error estimate: {e}"
         return vertex_error(positions, x1), time.perf_counter() - t0, ""

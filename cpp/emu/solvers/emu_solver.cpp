@@ -404,7 +404,7 @@ class EmuSolver::Newton {
     if (refresh) {
       s_.blocks_into(c_, F_, &A_, exact ? &A_exact_ : nullptr);
       if (s_.schur_) {
-        if (!s_.schur_->update(A_)) return failed(dir, "Schur-complement preconditioner could not be factorised");
+        if (!s_.schur_->update(A_)) return dir.fail("Schur-complement preconditioner could not be factorised");
       } else {
         s_.woodbury_->update(A_);
       }
@@ -444,7 +444,7 @@ class EmuSolver::Newton {
       precondition(gR_, d_);
       d_ = -d_;
       dir.slope = dot(gR_, d_);
-      if (!(dir.slope < 0)) return failed(dir, "no descent direction (Hessian approximation broke down)");
+      if (!(dir.slope < 0)) return dir.fail("no descent direction (Hessian approximation broke down)");
     }
     // Without bones x*(F + s d) = x + s dx: one fit per direction. A bone's
     // path R + s d is retracted to rotations, so each trial refits.
@@ -459,21 +459,20 @@ class EmuSolver::Newton {
   }
 
   double trial_energy(double s) {
+    trial_s_ = s;
     if (!bones_) return s_.energy_along(c_, F_, Fx_, &d_, &Fd_, s) - Wx_ - s * Wdx_;
     s_.retract(F_, d_, s, Ftrial_);
     s_.fit_into(c_, Ftrial_, xtrial_, Fxtrial_);
     return s_.energy_along(c_, Ftrial_, Fxtrial_, nullptr, nullptr, 0.0) - s_.load_work(c_, xtrial_);
   }
 
-  double trial_grad_norm(double s) {
+  double trial_grad_norm() {
     Mat9X g1;
-    if (bones_) {
-      s_.retract(F_, d_, s, Ftrial_);
-      s_.fit_into(c_, Ftrial_, xtrial_, Fxtrial_);
+    if (bones_) {  // the retracted trial point and its fit, from trial_energy
       s_.gradient_into(c_, Ftrial_, Fxtrial_, g1);
       s_.project_tangent(Ftrial_, g1);
     } else {
-      const Mat9X F1 = F_ + s * d_, Fx1 = Fx_ + s * Fd_;
+      const Mat9X F1 = F_ + trial_s_ * d_, Fx1 = Fx_ + trial_s_ * Fd_;
       s_.gradient_into(c_, F1, Fx1, g1);
     }
     return g1.norm();
@@ -481,9 +480,10 @@ class EmuSolver::Newton {
 
   double take_step(int it, double s, double E_trial) {
     if (bones_) {
-      s_.retract(F_, d_, s, Ftrial_);
-      F_ = Ftrial_;
-      s_.fit_into(c_, F_, x_, Fx_);
+      if (s != trial_s_) trial_energy(s);  // the driver steps to its last trial point: reuse its fit
+      F_.swap(Ftrial_);
+      x_.swap(xtrial_);
+      Fx_.swap(Fxtrial_);
       E_ = E_trial;
     } else if (it % 50 == 0) {  // x*(F) is linear in F; refit now and then against drift
       F_ += s * d_;
@@ -529,11 +529,6 @@ class EmuSolver::Newton {
     if (bones_) coarse_.apply(in, out, base);
     else base(in, out);
   }
-  static SearchDirection failed(const SearchDirection& dir, const char* why) {
-    SearchDirection f = SearchDirection::failed(why);
-    f.filtered = dir.filtered;
-    return f;
-  }
 
   EmuSolver& s_;
   const Context& c_;
@@ -541,7 +536,7 @@ class EmuSolver::Newton {
   const bool exact_allowed_ = s_.options_.exact_when_definite && s_.emu_.step == EmuStep::NewtonKrylov;
   Mat9X F_, Fx_, g_, gR_, d_, Fd_, Ftrial_, Fxtrial_;
   Eigen::MatrixX3d x_, dx_, xtrial_;
-  double E_ = 0, gn_ = 0, g0_ = -1, Wx_ = 0, Wdx_ = 0;
+  double E_ = 0, gn_ = 0, g0_ = -1, Wx_ = 0, Wdx_ = 0, trial_s_ = -1;
   std::vector<Mat9> A_, A_exact_;
   bool exact_ok_ = true, exact_step_ = false;
   int since_refresh_ = 0, cg_after_refresh_ = -1, last_cg_ = 0, dir_cg_ = 0;

@@ -169,22 +169,12 @@ class FemSolver::Newton {
     if (!have) {
       ++dir.filtered;
       s_.assemble_hessian(x_, act_, false);
-      if (!filtered_direction()) {
-        SearchDirection f = SearchDirection::failed("Newton matrix is not positive definite even after regularisation");
-        f.filtered = dir.filtered;
-        f.exact_failed = dir.exact_failed;
-        return f;
-      }
+      if (!filtered_direction()) return dir.fail("Newton matrix is not positive definite even after regularisation");
     }
     last_neutral_ = have ? std::vector<NeutralMode>() : neutral_;
     neutral_.clear();
     dir.slope = slope();
-    if (!(dir.slope < 0)) {
-      SearchDirection f = SearchDirection::failed("Newton direction is not a descent direction");
-      f.filtered = dir.filtered;
-      f.exact_failed = dir.exact_failed;
-      return f;
-    }
+    if (!(dir.slope < 0)) return dir.fail("Newton direction is not a descent direction");
     return dir;
   }
 
@@ -194,8 +184,10 @@ class FemSolver::Newton {
     return s_.energy_with(trial_, act_, load_.gravity) + s_.bones_.spring_energy(nd_ ? trial_poses_ : poses_);
   }
 
-  double trial_grad_norm(double s) {
-    trial_energy(s);
+  /// The positions of the last trial_energy call.
+  const Eigen::MatrixX3d& trial_positions() const { return trial_; }
+
+  double trial_grad_norm() {  // at the trial point of the last trial_energy call
     Eigen::VectorXd gs1, gb1;
     reduced_gradient(trial_, nd_ ? trial_poses_ : poses_, gs1, gb1);
     return s_.bones_.gradient_norm(gs1.squaredNorm(), gb1);
@@ -330,41 +322,30 @@ constexpr double kCorrectionContraction = 0.1;
 }  // namespace
 
 Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen::MatrixX3d& x0,
-                                              CorrectionHessian hessian, int max_steps,
-                                              std::vector<double>* step_sizes) {
+                                              CorrectionHessian hessian, int max_steps) {
   validate_load(model_, load);
   if (max_steps < 1) throw std::invalid_argument("max_steps must be >= 1");
   const Eigen::VectorXd act = tet_activation(model_, load);
   Eigen::MatrixX3d x = x0;
   for (int step = 0; step < max_steps; ++step) {
     Newton newton(*this, load, act, &x);
-    Eigen::MatrixX3d x_exact, x_filtered;
-    BonePoses poses;
-    const bool exact = hessian != CorrectionHessian::Filtered;
-    if (!newton.correction_direction(exact))
+    if (!newton.correction_direction(hessian != CorrectionHessian::Filtered))
       throw std::runtime_error("no Newton correction from these positions: the Newton matrix is not positive "
                                "definite");
     bool used_exact = newton.last_direction_exact();
-    newton.step_positions(1.0, x_exact, poses);
-    // Both: the exact step where the exact matrix is definite (else the call
-    // above already fell back to the filtered one) and the filtered one; keep
-    // the step that lowers the FEM energy more.
-    // An exact step that cuts the gradient tenfold is in Newton's regime and
-    // kept as it is (one factorisation); otherwise the filtered one competes.
-    const bool newton_regime =
-        used_exact && newton.trial_grad_norm(1.0) <= kCorrectionContraction * newton.grad_norm();
-    if (hessian == CorrectionHessian::LowerEnergy && used_exact && !newton_regime) {
-      const double E_exact = newton.trial_energy(1.0);
-      if (newton.correction_direction(false)) {
-        newton.step_positions(1.0, x_filtered, poses);
-        if (newton.trial_energy(1.0) < E_exact) {
-          x_exact.swap(x_filtered);
-          used_exact = false;
-        }
-      }
+    const double E_first = newton.trial_energy(1.0);
+    Eigen::MatrixX3d x1 = newton.trial_positions();
+    // The exact step (where the exact matrix is definite; else the call above
+    // already fell back to the filtered one) is kept as it is when it cuts the
+    // gradient tenfold (Newton's regime, one factorisation); otherwise the
+    // filtered step competes and the one that lowers the FEM energy more wins.
+    if (hessian == CorrectionHessian::LowerEnergy && used_exact &&
+        newton.trial_grad_norm() > kCorrectionContraction * newton.grad_norm() &&
+        newton.correction_direction(false) && newton.trial_energy(1.0) < E_first) {
+      x1 = newton.trial_positions();
+      used_exact = false;
     }
-    if (step_sizes) step_sizes->push_back((x_exact - x).rowwise().norm().maxCoeff());
-    x.swap(x_exact);
+    x.swap(x1);
     if (used_exact) break;  // in Newton's regime: one step is the correction
   }
   return x;

@@ -42,10 +42,9 @@ class FemSolver {
   /// the filtered matrix (x0 is not yet in Newton's regime) is followed by
   /// another, up to max_steps. One or two factorisations per step; throws
   /// std::runtime_error if no Newton direction exists.
-  /// step_sizes (optional): the largest vertex displacement of each step taken.
   Eigen::MatrixX3d newton_correction(const LoadCase& load, const Eigen::MatrixX3d& x0,
                                      CorrectionHessian hessian = CorrectionHessian::LowerEnergy,
-                                     int max_steps = 1, std::vector<double>* step_sizes = nullptr);
+                                     int max_steps = 1);
 
   /// The Newton system in the solver's reduced unknowns z = (displacements of
   /// the free soft vertices, 3 #free; then the bone increments: exponential-map

@@ -13,8 +13,9 @@
 //   double energy() const;          double grad_norm() const;
 //   SearchDirection direction(int iteration);   // computed at the current iterate
 //   double trial_energy(double s);              // energy at step s along it (non-finite: rejected)
-//   double trial_grad_norm(double s);           // gradient norm there (round-off rule)
-//   double take_step(int iteration, double s, double E_trial);  // move; returns the new energy
+//   double trial_grad_norm();                   // gradient norm at the last trial point (round-off rule)
+//   double take_step(int iteration, double s, double E_trial);  // move to the step s of the last
+//                                                               // trial_energy call; returns the new energy
 //   const Eigen::MatrixX3d& positions() const;  // #V by 3 (only for SolverOptions::on_iteration)
 #include <string>
 
@@ -33,11 +34,11 @@ struct SearchDirection {
   int cg_iterations = 0;
   int filtered = 0;        // 1 if the step fell back to the PSD-filtered Hessian
   int exact_failed = 0;    // failed factorisations of the exact Hessian
-  static SearchDirection failed(std::string why) {
-    SearchDirection d;
-    d.ok = false;
-    d.failure = std::move(why);
-    return d;
+  /// This direction marked as failed (its counters kept for the result).
+  SearchDirection& fail(std::string why) {
+    ok = false;
+    failure = std::move(why);
+    return *this;
   }
 };
 
@@ -79,7 +80,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     auto ls = armijo_backtracking([&](double s) { return p.trial_energy(s); }, E, d.slope, o);
     if (!ls.success) {
       const double E1 = p.trial_energy(1.0);
-      if (!accept_at_roundoff(E1, p.trial_grad_norm(1.0), E, p.grad_norm(), conv.E0)) {
+      if (!accept_at_roundoff(E1, p.trial_grad_norm(), E, p.grad_norm(), conv.E0)) {
         res.status = "stalled: no step along the search direction decreases the energy or the gradient "
                      "(round-off level reached; loosen rtol_grad / rtol_energy)";
         break;
