@@ -5,7 +5,7 @@ import pytest
 import emu
 from emu.bones import bone_motion, signed_angle
 from emu.scenes import arm
-from conftest import gap_scene, shared_path
+from conftest import bone_chain_scene, gap_scene, shared_path
 
 
 def hinge_vertices(scene, a, b):
@@ -139,14 +139,7 @@ def test_movable_bone_errors(small_arm):
 def test_joint_between_two_movable_bones(small_arm):
     """EMU handles a chain (the joint as constraint rows); the FEM reference says
     it does not, naming the bones."""
-    pts, tets, lab = emu.meshes.block_mesh(
-        {"a": [(0, 0)], "b": [(1, 1)], "c": [(2, 2)], "m1": [(0, 1)], "m2": [(1, 2)], "m3": [(2, 1), (1, 0)]}, 1)
-    s = emu.Scene(pts, tets)
-    s.add_bone("a", lab == 0)
-    s.add_bone("b", lab == 1, fixed=False)
-    s.add_bone("c", lab == 2, fixed=False)
-    for i, name in enumerate(("m1", "m2", "m3")):
-        s.add_muscle(name, lab == 3 + i, [1, 1, 0])
+    s = bone_chain_scene()
     kinds = {tuple(sorted(j.bones)): j.kind for j in s.joints()}
     assert kinds[("a", "b")] == "hinge" and kinds[("b", "c")] == "hinge"
     with pytest.raises(ValueError, match="two movable bones"):
