@@ -22,20 +22,8 @@ import warnings
 import numpy as np
 
 import emu
+from bench_scenes import SCENES
 
-SCENES = {
-    "fusiform_20k": lambda: (emu.scenes.fusiform(tets=20000, warn=False), {"belly": 5e4}, False),
-    "fusiform_r3": lambda: (emu.scenes.fusiform(3, warn=False), {"belly": 5e4}, False),
-    "simple_joint_free": lambda: (emu.io.load_scene(emu.datasets.path("simple_joint"), free_bones=["bottom_bone"],
-                                                    warn=False), {"muscle": 1e4}, False),
-    "big_muscle_free": lambda: (emu.io.load_scene(emu.datasets.path("big_muscle"), free_bones=["bone_2"], warn=False),
-                                {"muscle": 1e4}, False),
-    "arm_r5": lambda: (emu.scenes.arm(5), {"flexor": 0.45}, True),
-    "arm_r3": lambda: (emu.scenes.arm(3), {"flexor": 0.45}, True),
-    "neck_r2": lambda: (emu.scenes.neck(2), {"left_front": 0.5}, True),
-    "realistic_biceps": lambda: (emu.io.load_scene(emu.datasets.path("realistic_biceps"), free_bones=["forearm"],
-                                                   warn=False), {"biceps": 2e3}, False),
-}
 TARGETS = (0.02, 0.01, 0.005)
 
 

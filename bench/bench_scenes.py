@@ -1,0 +1,24 @@
+"""The scenes the benchmark scripts share, by name: each a function returning
+(scene, activation, normalized). The authors' research scenes come through
+emu.datasets (EMU_DATA_DIR for a local copy)."""
+from __future__ import annotations
+
+import emu
+
+
+def _research(name, free_bones=()):
+    return emu.io.load_scene(emu.datasets.path(name), free_bones=list(free_bones), warn=False)
+
+
+SCENES = {
+    "fusiform_r3": lambda: (emu.scenes.fusiform(3, warn=False), {"belly": 5e4}, False),
+    "fusiform_20k": lambda: (emu.scenes.fusiform(tets=20000, warn=False), {"belly": 5e4}, False),
+    "simple_joint": lambda: (_research("simple_joint"), {"muscle": 1e4}, False),
+    "simple_joint_free": lambda: (_research("simple_joint", ["bottom_bone"]), {"muscle": 1e4}, False),
+    "big_muscle_free": lambda: (_research("big_muscle", ["bone_2"]), {"muscle": 1e4}, False),
+    "big_muscle_isometric": lambda: (_research("big_muscle"), {"muscle": 2e4}, False),
+    "arm_r3": lambda: (emu.scenes.arm(3), {"flexor": 0.45}, True),
+    "arm_r5": lambda: (emu.scenes.arm(5), {"flexor": 0.45}, True),
+    "neck_r2": lambda: (emu.scenes.neck(2), {"left_front": 0.5}, True),
+    "realistic_biceps": lambda: (_research("realistic_biceps", ["forearm"]), {"biceps": 2e3}, False),
+}
