@@ -23,6 +23,7 @@ import numpy as np
 
 import emu
 from bench_scenes import SCENES
+from emu.geometry import time_within
 
 TARGETS = (0.02, 0.01, 0.005)
 
@@ -35,13 +36,6 @@ def curve(scene, method, act, normalized, fem, **kw):
     sol = solver.solve(act, normalized=normalized, record_iterates=True)
     t, e = emu.error_history(sol, fem)
     return setup + t, e, sol
-
-
-def time_to(t, e, target):
-    above = np.flatnonzero(e > target)
-    if len(above) == 0:
-        return float(t[0])
-    return float(t[above[-1] + 1]) if above[-1] + 1 < len(t) else float("inf")
 
 
 def pareto(curves):
@@ -111,10 +105,10 @@ def main(argv=None):
         front = pareto([(t, e) for _, t, e in runs])
         png = os.path.join(a.out, f"{name}.png")
         plot(png, f"{name} ({len(scene.tets)} tets)", runs, front)
-        fem_t = [time_to(runs[0][1], runs[0][2], g) for g in TARGETS]
+        fem_t = [time_within(runs[0][1], runs[0][2], g) for g in TARGETS]
         best = []
         for g in TARGETS:
-            times = [(time_to(t, e, g), label) for label, t, e in runs[1:]]
+            times = [(time_within(t, e, g), label) for label, t, e in runs[1:]]
             best.append(min(times))
         summary[name] = {"tets": len(scene.tets), "fem": fem_t, "emu_best": [b[0] for b in best],
                          "emu_best_run": [b[1] for b in best],

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["error_history", "time_to_error", "bbox_diagonal", "vertex_error", "deformation_gradients"]
+__all__ = ["error_history", "time_to_error", "time_within", "bbox_diagonal", "vertex_error", "deformation_gradients"]
 
 
 def bbox_diagonal(points) -> float:
@@ -45,7 +45,13 @@ def error_history(solution, reference, points=None) -> tuple:
 def time_to_error(solution, reference, target: float, points=None) -> float:
     """The solve time at which ``solution``'s iterates first come within
     ``target`` vertex error of ``reference`` (and stay there); inf if never."""
-    t, e = error_history(solution, reference, points)
+    return time_within(*error_history(solution, reference, points), target)
+
+
+def time_within(t, e, target: float) -> float:
+    """The first time of an error curve (t, e: (k,) arrays, t increasing) from
+    which every error is within ``target``; inf if the last one is not."""
+    t, e = np.asarray(t, float), np.asarray(e, float)
     above = np.flatnonzero(e > target)
     if len(above) == 0:
         return float(t[0])

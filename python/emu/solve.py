@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from dataclasses import dataclass, field
 
@@ -406,11 +407,10 @@ class Solver:
 
     def _estimate_error(self, load, positions) -> tuple:
         """(estimate, seconds, note): EMU's vertex error to FEM, estimated by the
-        linearised correction x1 = x + dx of FEM's Newton step at EMU's positions
-        x (the step that lowers the FEM energy more of the exact and the
-        PSD-filtered Newton matrix): estimate = vertex_error(x, x1)."""
-        import time
-
+        linearised correction x1 of FEM's Newton steps at EMU's positions x
+        (FemSolver::newton_correction: the exact step in Newton's regime, else
+        the lower-energy one of the exact and PSD-filtered steps, another step
+        after a filtered one): estimate = vertex_error(x, x1)."""
         t0 = time.perf_counter()
         if self._estimator is None and not self._estimator_error:
             opts = _core.SolverOptions()

@@ -385,7 +385,6 @@ class EmuSolver::Newton {
 
   double energy() const { return E_; }
   double grad_norm() const { return gn_; }
-  const Mat9X& unknowns() const { return F_; }
   /// The fit of the current iterate.
   const Eigen::MatrixX3d& positions() const { return x_; }
   const std::vector<NeutralMode>& neutral_modes() const { return coarse_.neutral_modes(); }
