@@ -35,7 +35,12 @@ setup() {
 }
 
 cpp_tests() {
-  cmake -S . -B build/ctest -DEMU_BUILD_TESTS=ON -DCMAKE_BUILD_TYPE=Release >/dev/null
+  # the C++ microbenchmarks (bench/micro) build and run once too: Google Benchmark
+  dpkg -s libbenchmark-dev >/dev/null 2>&1 || {
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libbenchmark-dev >/dev/null
+  }
+  cmake -S . -B build/ctest -DEMU_BUILD_TESTS=ON -DEMU_BUILD_MICROBENCH=ON -DCMAKE_BUILD_TYPE=Release >/dev/null
   cmake --build build/ctest -j "$(nproc)" >/dev/null
   (cd build/ctest && ctest --output-on-failure)
 }

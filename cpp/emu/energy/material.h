@@ -1,9 +1,11 @@
 #pragma once
 // Soft-tissue density per unit rest volume: Stable Neo-Hookean plus the active
 // fibre term. The Hessian is made PSD per element before any Newton-type use:
-// only the Neo-Hookean part can be indefinite (the fibre Hessian is PSD).
+// only the Neo-Hookean part can be indefinite (the fibre Hessian is PSD and
+// constant), and it is projected in closed form from its analytic eigensystem
+// (snh_eigensystem.h; psd_project.h is the numerical reference).
 #include "emu/energy/fiber.h"
-#include "emu/energy/psd_project.h"
+#include "emu/energy/snh_eigensystem.h"
 #include "emu/energy/stable_neo_hookean.h"
 
 namespace emu {
@@ -28,7 +30,7 @@ inline Mat3 material_stress(const TetMaterial& m, const Mat3& F) {
 
 inline Mat9 material_hessian_psd(const TetMaterial& m, const Mat3& F,
                                  EigenFilter filter = EigenFilter::Clamp) {
-  Mat9 H = psd_project<9>(snh::hessian(F, m.mu, m.lambda), filter);
+  Mat9 H = snh::hessian_psd(F, m.mu, m.lambda, filter);
   if (m.activation != 0.0) H += fiber::hessian(m.fiber, m.activation);
   return H;
 }
@@ -47,7 +49,7 @@ inline void material_hessians(const TetMaterial& m, const Mat3& F, EigenFilter f
   const Mat9 H = snh::hessian(F, m.mu, m.lambda);
   Mat9 fib = Mat9::Zero();
   if (m.activation != 0.0) fib = fiber::hessian(m.fiber, m.activation);
-  if (psd) *psd = psd_project<9>(H, filter) + fib;
+  if (psd) *psd = snh::project_hessian(H, F, m.mu, m.lambda, filter) + fib;
   if (exact) *exact = H + fib;
 }
 

@@ -1,0 +1,97 @@
+// Microbenchmarks of emu's element kernels (Google Benchmark), each reported
+// beside the machine's memory bandwidth so a kernel's time can be read against
+// its memory-traffic bound:
+//   cmake -S . -B build/micro -DEMU_BUILD_MICROBENCH=ON && cmake --build build/micro -j 2
+//   build/micro/bench_kernels [--benchmark_filter=projection]
+// Per-element rates are items_per_second (elements); bytes_per_second is the
+// traffic the kernel must at least move (inputs read + outputs written).
+#include <random>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+
+#include "emu/energy/material.h"
+#include "emu/energy/psd_project.h"
+#include "emu/energy/snh_eigensystem.h"
+
+using namespace emu;
+
+namespace {
+constexpr double kMu = 2.0e4, kLambda = 1.0e6;
+
+/// n deformation gradients I + N(0, spread^2) per entry (spread 0.3: about
+/// half of the SNH Hessians are indefinite, as in a strongly activated muscle).
+std::vector<Mat3> random_gradients(int n, double spread, unsigned seed = 1) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> g(0.0, spread);
+  std::vector<Mat3> Fs(n);
+  for (Mat3& F : Fs) {
+    F.setIdentity();
+    for (int i = 0; i < 9; ++i) F.data()[i] += g(rng);
+  }
+  return Fs;
+}
+
+constexpr int kElements = 4096;
+
+void element_energy_gradient_hessian(benchmark::State& state) {
+  const auto Fs = random_gradients(kElements, 0.3);
+  const TetMaterial m{kMu, kLambda, 3e4, Vec3(0.0, 0.0, 1.0)};
+  for (auto _ : state)
+    for (const Mat3& F : Fs) {
+      double e = material_energy(m, F);
+      Mat3 P = material_stress(m, F);
+      Mat9 H = material_hessian(m, F);
+      benchmark::DoNotOptimize(e);
+      benchmark::DoNotOptimize(P);
+      benchmark::DoNotOptimize(H);
+    }
+  state.SetItemsProcessed(state.iterations() * kElements);
+  state.SetBytesProcessed(state.iterations() * kElements * (9 + 1 + 9 + 81) * 8);
+}
+
+// The PSD projection of the SNH Hessian: numerical 9x9 eigen-decomposition
+// against the analytic eigensystem (state.range(0) = 100 x spread of F).
+void projection_numerical(benchmark::State& state) {
+  const auto Fs = random_gradients(kElements, state.range(0) / 100.0);
+  std::vector<Mat9> H(Fs.size());
+  for (size_t i = 0; i < Fs.size(); ++i) H[i] = snh::hessian(Fs[i], kMu, kLambda);
+  for (auto _ : state)
+    for (size_t i = 0; i < Fs.size(); ++i) {
+      Mat9 P = psd_project<9>(H[i]);
+      benchmark::DoNotOptimize(P);
+    }
+  state.SetItemsProcessed(state.iterations() * kElements);
+}
+
+void projection_closed_form(benchmark::State& state) {
+  const auto Fs = random_gradients(kElements, state.range(0) / 100.0);
+  std::vector<Mat9> H(Fs.size());
+  for (size_t i = 0; i < Fs.size(); ++i) H[i] = snh::hessian(Fs[i], kMu, kLambda);
+  for (auto _ : state)
+    for (size_t i = 0; i < Fs.size(); ++i) {
+      Mat9 P = snh::project_hessian(H[i], Fs[i], kMu, kLambda);
+      benchmark::DoNotOptimize(P);
+    }
+  state.SetItemsProcessed(state.iterations() * kElements);
+}
+
+// STREAM triad a = b + s c over arrays far larger than the caches: the
+// machine's sustainable bandwidth, the bound for streaming kernels.
+void stream_triad(benchmark::State& state) {
+  const size_t n = size_t(1) << 23;  // 3 x 64 MB
+  std::vector<double> a(n, 0.0), b(n, 1.0), c(n, 2.0);
+  for (auto _ : state) {
+    for (size_t i = 0; i < n; ++i) a[i] = b[i] + 3.0 * c[i];
+    benchmark::DoNotOptimize(a.data());
+    benchmark::ClobberMemory();
+  }
+  state.SetBytesProcessed(state.iterations() * n * 3 * sizeof(double));
+}
+}  // namespace
+
+BENCHMARK(element_energy_gradient_hessian);
+BENCHMARK(projection_numerical)->Arg(1)->Arg(30);
+BENCHMARK(projection_closed_form)->Arg(1)->Arg(30);
+BENCHMARK(stream_triad)->Unit(benchmark::kMillisecond);
+BENCHMARK_MAIN();

@@ -1,0 +1,46 @@
+"""Solve times of both methods on the registry scenes, best of a few repeats
+(the before/after instrument for changes to the per-iteration cost): FEM to
+its default tolerance, EMU at a fixed alpha capped at a fixed number of
+Newton steps (so both sides of a change do the same work).
+
+    python bench/solve_times.py [--scenes realistic_biceps fusiform_20k arm_r5] [--threads 1]
+        [--repeats 3] [--emu-iterations 10]
+"""
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+
+import emu
+from bench_scenes import SCENES
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scenes", nargs="*", default=["realistic_biceps", "fusiform_20k", "arm_r5"])
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--emu-iterations", type=int, default=10)
+    ap.add_argument("--alpha", type=float, default=100.0)
+    a = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    emu.runtime.set_threads(a.threads)
+    i = emu.info()
+    print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {a.threads}; {time.strftime('%Y-%m-%d')}\n")
+    print("| scene | method | iterations / CG | best solve s |")
+    print("|---|---|---|---|")
+    for name in a.scenes:
+        scene, act, normalized = SCENES[name]()
+        for method, kw in (("fem", {}), ("emu", dict(alpha=a.alpha, error_estimate=False,
+                                                      max_iterations=a.emu_iterations))):
+            solver = emu.Solver(scene, method, **kw)
+            best = float("inf")
+            for _ in range(a.repeats):
+                sol = solver.solve(act, normalized=normalized)
+                best = min(best, sol.time_s)
+            print(f"| {name} | {method} | {sol.iterations} / {sol.cg_iterations} | {best:.3f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
