@@ -424,3 +424,17 @@ def test_rigid_fit_recovers_a_rigid_motion():
     assert np.linalg.det(Rm) == pytest.approx(1.0)
     with pytest.raises(ValueError, match="equal shape"):
         rigid_fit(X, X[:5])
+
+
+def test_recycled_directions_change_cg_not_the_answer():
+    """big_muscle with bone_2 free: a CG solve of 134 iterations after one of
+    20 is recycled into the coarse space of the later steps; the answer is the
+    same equilibrium (the preconditioner changes CG's path, not the answer)."""
+    s = emu.io.load_scene(shared_path("big_muscle"), free_bones=["bone_2"], warn=False)
+    plain = emu.Solver(s, "emu", alpha=100).solve({"muscle": 1e4})
+    recycled = emu.Solver(s, "emu", alpha=100, recycled_directions=4).solve({"muscle": 1e4})
+    assert plain.converged and recycled.converged, (plain.status, recycled.status)
+    assert recycled.cg_iterations != plain.cg_iterations   # the option reached the solver
+    assert emu.vertex_error(recycled, plain) < 1e-5
+    with pytest.raises(ValueError, match="recycled_directions"):
+        emu.Solver(s, "emu", recycled_directions=-1)

@@ -52,26 +52,15 @@ void element_energy_gradient_hessian(benchmark::State& state) {
 }
 
 // The PSD projection of the SNH Hessian: numerical 9x9 eigen-decomposition
-// against the analytic eigensystem (state.range(0) = 100 x spread of F).
-void projection_numerical(benchmark::State& state) {
+// (closed_form = false) against the analytic eigensystem (state.range(0) =
+// 100 x spread of F).
+void projection(benchmark::State& state, bool closed_form) {
   const auto Fs = random_gradients(kElements, state.range(0) / 100.0);
   std::vector<Mat9> H(Fs.size());
   for (size_t i = 0; i < Fs.size(); ++i) H[i] = snh::hessian(Fs[i], kMu, kLambda);
   for (auto _ : state)
     for (size_t i = 0; i < Fs.size(); ++i) {
-      Mat9 P = psd_project<9>(H[i]);
-      benchmark::DoNotOptimize(P);
-    }
-  state.SetItemsProcessed(state.iterations() * kElements);
-}
-
-void projection_closed_form(benchmark::State& state) {
-  const auto Fs = random_gradients(kElements, state.range(0) / 100.0);
-  std::vector<Mat9> H(Fs.size());
-  for (size_t i = 0; i < Fs.size(); ++i) H[i] = snh::hessian(Fs[i], kMu, kLambda);
-  for (auto _ : state)
-    for (size_t i = 0; i < Fs.size(); ++i) {
-      Mat9 P = snh::project_hessian(H[i], Fs[i], kMu, kLambda);
+      Mat9 P = closed_form ? snh::project_hessian(H[i], Fs[i], kMu, kLambda) : psd_project<9>(H[i]);
       benchmark::DoNotOptimize(P);
     }
   state.SetItemsProcessed(state.iterations() * kElements);
@@ -119,8 +108,8 @@ void stream_triad(benchmark::State& state) {
 }  // namespace
 
 BENCHMARK(element_energy_gradient_hessian);
-BENCHMARK(projection_numerical)->Arg(1)->Arg(30);
-BENCHMARK(projection_closed_form)->Arg(1)->Arg(30);
+BENCHMARK_CAPTURE(projection, numerical, false)->Arg(1)->Arg(30);
+BENCHMARK_CAPTURE(projection, closed_form, true)->Arg(1)->Arg(30);
 BENCHMARK(block_products)->Arg(0)->Arg(1);
 BENCHMARK(stream_triad)->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();

@@ -130,7 +130,8 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("cg_forcing_exponent", &EmuOptions::cg_forcing_exponent)
       .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh)
       .def_readwrite("preconditioner", &EmuOptions::preconditioner)
-      .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space);
+      .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space)
+      .def_readwrite("recycled_directions", &EmuOptions::recycled_directions);
 
   py::class_<SolveResult>(m, "SolveResult")
       .def_readonly("positions", &SolveResult::positions)

@@ -9,8 +9,9 @@ namespace emu {
 
 BoneCoarseSpace::BoneCoarseSpace(const UnknownLayout& layout, double alpha) : layout_(layout), alpha_(alpha) {}
 
-void BoneCoarseSpace::build(const Mat9X& F, const Follow& follow, const Product& product) {
-  const int nb = layout_.num_bones, nu = layout_.num_unknowns, nz = 3 * nb;
+void BoneCoarseSpace::build(const Mat9X& F, const Follow& follow, const Product& product,
+                            const std::vector<Mat9X>& extra) {
+  const int nb = layout_.num_bones, nu = layout_.num_unknowns, nz = 3 * nb + static_cast<int>(extra.size());
   Z_.assign(nz, Mat9X::Zero(9, nu));
   HZ_.resize(nz);
   for (int b = 0; b < nb; ++b)
@@ -23,6 +24,7 @@ void BoneCoarseSpace::build(const Mat9X& F, const Follow& follow, const Product&
       Z.col(ub) = flatten(Mat3(W * unflatten(F.col(ub))));
       follow(Z);
     }
+  for (size_t e = 0; e < extra.size(); ++e) Z_[3 * nb + e] = extra[e];
   Eigen::MatrixXd E(nz, nz);
   for (int j = 0; j < nz; ++j) {
     product(Z_[j], HZ_[j]);
@@ -47,6 +49,7 @@ void BoneCoarseSpace::build(const Mat9X& F, const Follow& follow, const Product&
     }
     balancing_ = false;
     if (es.eigenvalues()(i) < -1e-9 * scale) continue;  // negative curvature: not a neutral mode
+    if (v.head(3 * nb).norm() < 0.5) continue;            // mostly a recycled direction: not a bone's mode
     int best = 0;
     for (int b = 1; b < nb; ++b)
       if (v.segment<3>(3 * b).norm() > v.segment<3>(3 * best).norm()) best = b;

@@ -36,8 +36,10 @@ class BoneCoarseSpace {
 
   BoneCoarseSpace(const UnknownLayout& layout, double alpha);
 
-  /// Rebuild at F (9 x #unknowns; bone columns rotations) with H's product.
-  void build(const Mat9X& F, const Follow& follow, const Product& product);
+  /// Rebuild at F (9 x #unknowns; bone columns rotations) with H's product;
+  /// `extra` directions (9 x #unknowns each, bone columns tangent at F: the
+  /// recycled directions of earlier CG solves) join the 3 turns per bone.
+  void build(const Mat9X& F, const Follow& follow, const Product& product, const std::vector<Mat9X>& extra = {});
   bool built() const { return built_; }
 
   /// out = M^-1 in around the base inverse base(in, out) (tangent-projected).

@@ -425,6 +425,7 @@ class EmuSolver::Newton {
       else s_.hessian_product_into(H, v, out);
     };
     // The bone coarse space follows the Hessian CG uses (rebuilt every step).
+    for (Mat9X& r : recycled_) s_.project_tangent(F_, r);  // tangent at the current bones
     if (bones_ && o.bone_coarse_space)
       coarse_.build(
           F_,
@@ -432,7 +433,7 @@ class EmuSolver::Newton {
             s_.fit_linear_into(Z, dx_, Fd_);
             for (int u = 0; u < s_.layout_.num_soft; ++u) Z.col(u) = Fd_.col(s_.layout_.unknown_tets[u]);
           },
-          product);
+          product, recycled_);
     ++since_refresh_;
     if (o.step == EmuStep::Woodbury) {
       precondition(gR_, d_);
@@ -445,6 +446,7 @@ class EmuSolver::Newton {
       dir.cg_iterations = cg.iterations;
       if (cg.negative_curvature) ++dir.filtered;  // exact H is indefinite here: keep what CG had
     }
+    if (o.recycled_directions > 0 && bones_ && dir.cg_iterations > std::max(50, 4 * last_cg_)) recycle(d_);
     dir.slope = dot(gR_, d_);
     if (!(dir.slope < 0)) {
       precondition(gR_, d_);
@@ -523,6 +525,17 @@ class EmuSolver::Newton {
   }
 
  private:
+  // A CG solve far longer than the last one met a mode the preconditioner
+  // misses; its direction (orthogonalised against those kept) joins the bone
+  // coarse space of the following steps, the oldest dropped beyond
+  // EmuOptions::recycled_directions (docs/DESIGN.md: measured).
+  void recycle(const Mat9X& d) {
+    Mat9X dn = d;
+    for (const Mat9X& r : recycled_) dn -= (dot(r, dn) / dot(r, r)) * r;
+    if (!(dn.norm() > 1e-3 * d.norm())) return;
+    recycled_.push_back(std::move(dn));
+    if (static_cast<int>(recycled_.size()) > s_.emu_.recycled_directions) recycled_.erase(recycled_.begin());
+  }
   void update_gradient() {
     s_.gradient_into(c_, F_, Fx_, g_);
     gR_ = g_;
@@ -547,6 +560,7 @@ class EmuSolver::Newton {
   bool exact_ok_ = true, exact_step_ = false;
   int since_refresh_ = 0, cg_after_refresh_ = -1, last_cg_ = 0, dir_cg_ = 0;
   BoneCoarseSpace coarse_;
+  std::vector<Mat9X> recycled_;
   Pcg<Mat9X> pcg_;
 };
 
