@@ -173,6 +173,7 @@ void bind_solvers(py::module_& m) {
             return run_solve([&] { return s.solve(l, &x0); });
           },
           py::arg("load"), py::arg("x0"), py::arg("on_iteration") = py::none())
+      .def("structures", &FemSolver::structures, "(name, bytes) of the structures this solver built")
       .def("energy", &FemSolver::energy, py::arg("load"), py::arg("x"), gil())
       .def("gradient", &FemSolver::gradient, py::arg("load"), py::arg("x"), gil())
       .def(
@@ -236,6 +237,7 @@ void bind_solvers(py::module_& m) {
       .def("block_hessians", &EmuSolver::block_hessians, py::arg("load"), py::arg("F"), py::arg("exact") = false,
            gil())
       .def("mode_matrix", &EmuSolver::mode_matrix)
+      .def("structures", &EmuSolver::structures, "(name, bytes) of the structures this solver built")
       .def("mode_values", &EmuSolver::mode_values)
       .def_property_readonly("modes", &EmuSolver::modes)
       .def_property_readonly("num_unknowns", &EmuSolver::num_unknowns)

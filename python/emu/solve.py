@@ -367,6 +367,16 @@ class Solver:
             self.set_alpha(max(self.alpha * 0.5, self.alpha * sol.error_estimate / (AIM * target)))
         return sol
 
+    def structures(self) -> dict:
+        """{name: bytes} of what this solver built for its scene (per-solve work
+        arrays aside), the error estimate's FEM system once built: a scene
+        without bones, joints, gravity or a Schur preconditioner lists none of
+        their structures (docs/DESIGN.md, "A scene pays for what it uses")."""
+        out = {name: int(b) for name, b in self._core.structures()}
+        if self._estimator is not None:
+            out.update({f"error estimate: {name}": int(b) for name, b in self._estimator.structures()})
+        return out
+
     def set_alpha(self, alpha: float) -> None:
         """EMU: a new alpha (relative to the reference shear modulus) for the
         following solves; nothing is refactorised."""

@@ -63,6 +63,21 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   tet_energy_.resize(model_.tets.rows());
 }
 
+std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
+  std::vector<std::pair<std::string, double>> out;
+  out.emplace_back("ACAP factor", 8.0 * acap_->factor().factor_nnz());
+  if (woodbury_->k() > 0) out.emplace_back("ACAP modes", woodbury_->mode_bytes());
+  if (!schur_) out.emplace_back("Woodbury block inverses", woodbury_->block_bytes());
+  if (schur_) out.emplace_back("Schur preconditioner", schur_->bytes());
+  if (layout_.num_bones) {
+    // Z and H Z: 3 turns per bone over all unknowns, rebuilt every Newton step
+    const double coarse = 2.0 * 3 * layout_.num_bones * 9.0 * layout_.num_unknowns * 8;
+    out.emplace_back("movable bones and their coarse space", coarse);
+  }
+  if (!layout_.joints.empty()) out.emplace_back("joints", sizeof(JointPoint) * double(layout_.joints.size()));
+  return out;
+}
+
 void EmuSolver::set_alpha(double alpha) {
   if (!(alpha > 0) || !std::isfinite(alpha)) throw std::invalid_argument("alpha must be positive and finite");
   emu_.alpha = alpha;

@@ -23,6 +23,8 @@
 // Unknowns: one per soft tet (tet order), then one per bone; the diagnostic
 // functions take and return #unknowns by 9 arrays (= #T by 9 without bones).
 #include <memory>
+#include <string>
+#include <utility>
 
 #include "emu/linalg/modes.h"
 #include "emu/model/unknown_layout.h"
@@ -77,6 +79,10 @@ class EmuSolver {
   double factor_seconds() const { return factor_seconds_; }
   double modes_seconds() const { return modes_seconds_; }
   double setup_seconds() const { return factor_seconds_ + modes_seconds_; }
+  /// The structures this solver built for its scene and their bytes (the
+  /// per-solve work arrays aside): what a scene without bones, joints or a
+  /// Schur preconditioner does not pay for is not listed.
+  std::vector<std::pair<std::string, double>> structures() const;
   double factor_nnz() const { return acap_->factor().factor_nnz(); }
   const Model& model() const { return model_; }
   int num_unknowns() const { return layout_.num_unknowns; }

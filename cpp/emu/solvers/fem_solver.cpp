@@ -27,6 +27,15 @@ FemSolver::FemSolver(const Model& model, const SolverOptions& options)
   setup_seconds_ = seconds_since(t0);
 }
 
+std::vector<std::pair<std::string, double>> FemSolver::structures() const {
+  std::vector<std::pair<std::string, double>> out;
+  out.emplace_back("Hessian factor", 8.0 * factor_.factor_nnz());
+  out.emplace_back("element Hessians and assembled matrix", 8.0 * double(element_.size() + values_.size()));
+  if (bones_.dofs() > 0)  // the border of the bordered Newton system and its solve, per step
+    out.emplace_back("movable bones", 8.0 * double(bones_.dofs()) * (6.0 * layout_.num_free + bones_.dofs()));
+  return out;
+}
+
 double FemSolver::energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act,
                               const Eigen::Vector3d& grav) const {
   const Eigen::Index m = model_.tets.rows();

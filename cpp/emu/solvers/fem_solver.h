@@ -8,6 +8,9 @@
 // (one factorisation of the soft block, one back-substitution per bone unknown
 // and a small dense Schur complement per iteration).
 #include <memory>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "emu/linalg/cholmod_factor.h"
 #include "emu/mesh/block_pattern.h"
@@ -62,6 +65,8 @@ class FemSolver {
   }
 
   double setup_seconds() const { return setup_seconds_; }
+  /// The structures this solver built and their bytes (see EmuSolver::structures).
+  std::vector<std::pair<std::string, double>> structures() const;
   const Model& model() const { return model_; }
   double factor_nnz() const { return factor_.factor_nnz(); }
 

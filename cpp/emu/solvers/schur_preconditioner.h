@@ -28,6 +28,10 @@ class SchurPreconditioner {
   void apply(const Mat9X& r, Mat9X& out) const;
 
   double factor_nnz() const { return factor_.factor_nnz(); }
+  /// Bytes held: the factor's entries, the block inverses and the assembly buffers.
+  double bytes() const {
+    return 8.0 * (factor_nnz() + element_.size() + values_.size()) + sizeof(Mat9) * double(Ainv_.size());
+  }
   /// A new alpha for the following update() calls.
   void set_alpha(double alpha) { alpha_ = alpha; }
 

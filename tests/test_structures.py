@@ -1,0 +1,34 @@
+"""Solver.structures(): a scene pays only for what it uses. A pinned muscle
+builds no bone, joint or Schur structures; each appears with the feature."""
+from __future__ import annotations
+
+import emu
+from emu.scenes import arm, fusiform
+
+
+def test_pinned_muscle_builds_only_the_acap_factor_modes_and_blocks():
+    s = fusiform(2, warn=False)
+    solver = emu.Solver(s, "emu", error_estimate=False, alpha=100)
+    solver.solve({"belly": 5e4})
+    built = solver.structures()
+    assert set(built) == {"ACAP factor", "ACAP modes", "Woodbury block inverses"}, built
+    assert built["Woodbury block inverses"] >= 81 * 8 * len(s.tets)   # one 9x9 inverse per tet
+    assert all(b > 0 for b in built.values())
+
+
+def test_each_feature_adds_its_own_structures():
+    s = fusiform(2, warn=False)
+    schur = emu.Solver(s, "emu", preconditioner="schur", error_estimate=False, alpha=100).structures()
+    assert "Schur preconditioner" in schur and "ACAP modes" not in schur and "Woodbury block inverses" not in schur
+    est = emu.Solver(s, "emu")           # the default estimates its error: FEM's system, built at the first solve
+    assert not any(k.startswith("error estimate") for k in est.structures())
+    est.solve({"belly": 5e4})
+    assert "error estimate: Hessian factor" in est.structures()
+    a = arm(1)
+    bones = emu.Solver(a, "emu", error_estimate=False, alpha=100).structures()
+    assert "movable bones and their coarse space" in bones and "joints" in bones
+
+
+def test_fem_lists_bones_only_where_a_bone_moves():
+    assert "movable bones" not in emu.Solver(fusiform(2, warn=False), "fem").structures()
+    assert "movable bones" in emu.Solver(arm(1), "fem").structures()
