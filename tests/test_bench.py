@@ -51,3 +51,30 @@ def test_error_estimate_small():
 def test_accuracy_small():
     out = run(BENCH / "accuracy.py", "--scenes", "fusiform_r3", "--fractions", "0.1")
     assert "| fusiform_r3 | fem |" in out and "| fusiform_r3 | " in out.split("against the strict")[1]
+
+
+def test_solve_times_small():
+    out = run(BENCH / "solve_times.py", "--scenes", "fusiform_r3", "--repeats", "1", "--emu-iterations", "3")
+    assert "| fusiform_r3 | fem |" in out and "| fusiform_r3 | emu | 3 /" in out
+
+
+def test_recycling_small():
+    out = run(BENCH / "recycling.py", "--scenes", "neck_r2")
+    row = [line for line in out.splitlines() if line.startswith("| neck_r2 |")][0]
+    assert float(row.split("|")[-2]) < 1e-5      # the same answer with and without recycling
+
+
+def test_features_small():
+    out = run(BENCH / "features.py", "--resolution", "2", "--arm-resolution", "1")
+    rows = {line.split("|")[1].strip(): line for line in out.splitlines() if line.startswith("| ") and "---" not in line}
+    assert "bone" not in rows["pinned muscle"] and "Schur" in rows["+ Schur preconditioner"]
+    assert "error estimate: Hessian factor" in rows["+ error estimate"]
+    assert "movable bones" in rows["arm, forearm on its hinge"] and "movable bones" not in rows["arm, forearm fixed"]
+
+
+def test_hard_isometric_small():
+    from conftest import shared_raw
+
+    shared_raw()
+    out = run(BENCH / "hard_isometric.py", "--activations", "2e3", "--activation", "2e3", "--alphas", "1000")
+    assert "| 2000 |" in out and "| 1000 |" in out and "| yes |" in out   # FEM from EMU's answer: the same equilibrium
