@@ -8,14 +8,13 @@
 // inner products are sums over all entries.
 //
 // The vector work of an iteration runs in two parallel passes (the update of
-// d and r with |r|^2, and r.z after the preconditioner), with dot products
-// summed per fixed chunk and then in chunk order: the same bits for any
-// number of threads.
-#include <algorithm>
-#include <array>
+// d and r with |r|^2; r.z and the update of p after the preconditioner), the
+// dot products by chunked_sum: the same bits for any number of threads.
 #include <cmath>
 
 #include <Eigen/Core>
+
+#include "emu/linalg/chunked_sum.h"
 
 namespace emu {
 
@@ -24,25 +23,6 @@ struct PcgResult {
   bool negative_curvature = false;
 };
 
-namespace pcg_detail {
-constexpr int kChunks = 64;
-
-/// sum_i f(i) over [0, n), summed per fixed chunk, then in chunk order.
-template <class F>
-double chunked_sum(Eigen::Index n, F&& f) {
-  std::array<double, kChunks> part{};
-#pragma omp parallel for schedule(static)
-  for (int c = 0; c < kChunks; ++c) {
-    const Eigen::Index lo = n * c / kChunks, hi = n * (c + 1) / kChunks;
-    double s = 0;
-    for (Eigen::Index i = lo; i < hi; ++i) s += f(i);
-    part[c] = s;
-  }
-  double s = 0;
-  for (double p : part) s += p;
-  return s;
-}
-}  // namespace pcg_detail
 
 template <class Vec>
 class Pcg {
@@ -52,7 +32,6 @@ class Pcg {
   template <class Product, class Precondition>
   PcgResult solve(Product&& product, Precondition&& precondition, const Vec& b, double tol, int max_iterations,
                   Vec& d) {
-    using pcg_detail::chunked_sum;
     PcgResult res;
     d.setZero(b.rows(), b.cols());
     r_ = b;
@@ -94,11 +73,7 @@ class Pcg {
   }
 
  private:
-  static double inner(const Vec& a, const Vec& b) {
-    const double* x = a.data();
-    const double* y = b.data();
-    return pcg_detail::chunked_sum(a.size(), [&](Eigen::Index k) { return x[k] * y[k]; });
-  }
+  static double inner(const Vec& a, const Vec& b) { return chunked_dot(a, b); }
   Vec r_, z_, p_, Hp_;
 };
 
