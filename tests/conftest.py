@@ -98,6 +98,26 @@ def bone_chain_scene():
     return s
 
 
+# Small scenes of each kind (a pinned muscle with tendons, a forearm on a hinge,
+# a head on a ball joint) with their activation, for tests that compare EMU
+# with the converged FEM answer (fixture scene_with_fem).
+SMALL_KINDS = {
+    "fusiform (pinned, tendons)": (lambda: emu.scenes.fusiform(2, warn=False), {"belly": 5e4}, False),
+    "arm (forearm on a hinge)": (lambda: emu.scenes.arm(1), {"flexor": 0.4}, True),
+    "neck (head on a ball joint)": (lambda: emu.scenes.neck(1), {"left_front": 0.5}, True),
+}
+
+
+@pytest.fixture(scope="module", params=list(SMALL_KINDS))
+def scene_with_fem(request):
+    """(scene, activation, normalized, FEM solution to a tight tolerance) for each of SMALL_KINDS."""
+    make, act, normalized = SMALL_KINDS[request.param]
+    scene = make()
+    fem = emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized)
+    assert fem.converged
+    return scene, act, normalized, fem
+
+
 def small_scene(r=2, pin="proximal", tendon_fraction=0.12, **muscle_kw):
     """The built-in fusiform muscle (emu.scenes.fusiform: tendon caps as a stiff
     tendon part, unless tendon_fraction=0) pinned at its proximal end (pin="both":

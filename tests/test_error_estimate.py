@@ -12,25 +12,10 @@ from emu.scenes import arm, fusiform, neck
 
 from conftest import bone_chain_scene
 
-SCENES = {
-    "fusiform (pinned, tendons)": (lambda: fusiform(2, warn=False), {"belly": 5e4}, False),
-    "arm (forearm on a hinge)": (lambda: arm(1), {"flexor": 0.4}, True),
-    "neck (head on a ball joint)": (lambda: neck(1), {"left_front": 0.5}, True),
-}
-
-
-@pytest.fixture(scope="module", params=list(SCENES))
-def case(request):
-    make, act, normalized = SCENES[request.param]
-    scene = make()
-    fem = emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized)
-    assert fem.converged
-    return scene, act, normalized, fem
-
 
 @pytest.mark.parametrize("alpha", [10.0, 100.0, 1000.0])
-def test_estimate_is_within_a_factor_two_of_the_true_error(case, alpha):
-    scene, act, normalized, fem = case
+def test_estimate_is_within_a_factor_two_of_the_true_error(scene_with_fem, alpha):
+    scene, act, normalized, fem = scene_with_fem
     sol = emu.Solver(scene, "emu", alpha=alpha).solve(act, normalized=normalized)
     assert sol.converged, sol.status
     true = emu.vertex_error(sol, fem)
@@ -41,8 +26,8 @@ def test_estimate_is_within_a_factor_two_of_the_true_error(case, alpha):
     assert "estimated error to FEM" in sol.summary()
 
 
-def test_estimate_follows_the_error_down_as_alpha_grows(case):
-    scene, act, normalized, fem = case
+def test_estimate_follows_the_error_down_as_alpha_grows(scene_with_fem):
+    scene, act, normalized, fem = scene_with_fem
     est = [emu.Solver(scene, "emu", alpha=a).solve(act, normalized=normalized).error_estimate for a in (10, 1000)]
     assert est[1] < 0.5 * est[0]
 
