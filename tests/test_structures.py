@@ -27,6 +27,8 @@ def test_each_feature_adds_its_own_structures():
     a = arm(1)
     bones = emu.Solver(a, "emu", error_estimate=False, alpha=100).structures()
     assert "movable bones and their coarse space" in bones and "joints" in bones
+    plain = emu.Solver(a, "emu", error_estimate=False, alpha=100, bone_coarse_space=False).structures()
+    assert "movable bones and their coarse space" not in plain and "joints" in plain
 
 
 def test_fem_lists_bones_only_where_a_bone_moves():

@@ -25,7 +25,7 @@ class NeutralModeWarning(UserWarning):
 METHODS = ("emu", "fem")
 STEPS = ("newton-krylov", "woodbury")
 # accuracy= (EMU): accept a solve whose error estimate is within ACCEPT x the
-# target (the estimate was measured at 0.65-1.13 x the true error), aim new
+# target (the estimate was measured at 0.65-1.35 x the true error), aim new
 # alphas at AIM x the target; stop iterating when a full step moves no vertex
 # by more than STEP_FRACTION x the target (measured: docs/DESIGN.md).
 # The step test needs steps that are Newton steps: after a warm start at a

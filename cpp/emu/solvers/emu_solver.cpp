@@ -69,10 +69,11 @@ std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
   if (woodbury_->k() > 0) out.emplace_back("ACAP modes", woodbury_->mode_bytes());
   if (!schur_) out.emplace_back("Woodbury block inverses", woodbury_->block_bytes());
   if (schur_) out.emplace_back("Schur preconditioner", schur_->bytes());
-  if (layout_.num_bones) {
-    // Z and H Z: 3 turns per bone over all unknowns, rebuilt every Newton step
-    const double coarse = 2.0 * 3 * layout_.num_bones * 9.0 * layout_.num_unknowns * 8;
-    out.emplace_back("movable bones and their coarse space", coarse);
+  if (layout_.num_bones && emu_.bone_coarse_space) {
+    // Z and H Z: 3 turns per bone and the recycled directions (at most) over
+    // all unknowns, rebuilt every Newton step
+    const double vectors = 3.0 * layout_.num_bones + emu_.recycled_directions;
+    out.emplace_back("movable bones and their coarse space", 2.0 * vectors * 9.0 * layout_.num_unknowns * 8);
   }
   if (!layout_.joints.empty()) out.emplace_back("joints", sizeof(JointPoint) * double(layout_.joints.size()));
   return out;
@@ -461,7 +462,8 @@ class EmuSolver::Newton {
       dir.cg_iterations = cg.iterations;
       if (cg.negative_curvature) ++dir.filtered;  // exact H is indefinite here: keep what CG had
     }
-    if (o.recycled_directions > 0 && bones_ && dir.cg_iterations > std::max(50, 4 * last_cg_)) recycle(d_);
+    if (o.recycled_directions > 0 && bones_ && o.bone_coarse_space && dir.cg_iterations > std::max(50, 4 * last_cg_))
+      recycle(d_);  // only where a coarse space takes them
     dir.slope = dot(gR_, d_);
     if (!(dir.slope < 0)) {
       precondition(gR_, d_);

@@ -22,7 +22,7 @@ struct SolverOptions {
   double step_tol_grad = 1.0;
   double armijo = 1e-4;        // sufficient-decrease constant
   int max_backtracks = 40;     // step halvings before the line search gives up
-  // Element Hessians: negative eigenvalues clamped (0) or reflected (1); see psd_project.h.
+  // Element Hessians: negative eigenvalues clamped (0) or reflected (1); see snh_eigensystem.h.
   int eigen_filter = 0;
   // Try the unfiltered Hessian first when it is positive definite (FEM: the
   // Cholesky succeeds; EMU: CG sees no negative curvature); fall back to the

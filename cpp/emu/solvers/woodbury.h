@@ -44,8 +44,8 @@ class Woodbury {
   int k() const { return 3 * ks_; }
   /// A new alpha for the following update() calls (the modes do not depend on it).
   void set_alpha(double alpha) { alpha_ = alpha; }
-  /// Bytes held: the modes (at the position unknowns and the vertices) and the
-  /// block inverses (allocated at the first update()).
+  /// Bytes held: the modes (at the position unknowns and the vertices), and
+  /// the block inverses (one per unknown) with the k x k system X.
   double mode_bytes() const { return 8.0 * (psi_.size() + psi_vertex_.size() + values_.size()); }
   double block_bytes() const { return sizeof(Mat9) * double(Ainv_.size()) + 8.0 * X_llt_.matrixLLT().size(); }
   /// Dense B (k x 9 #unknowns) and Lambda (k), for tests.

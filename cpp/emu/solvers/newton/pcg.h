@@ -23,7 +23,6 @@ struct PcgResult {
   bool negative_curvature = false;
 };
 
-
 template <class Vec>
 class Pcg {
  public:
