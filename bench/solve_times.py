@@ -1,7 +1,8 @@
 """Solve times of both methods on the registry scenes, best of a few repeats
 (the before/after instrument for changes to the per-iteration cost): FEM to
 its default tolerance, EMU at a fixed alpha capped at a fixed number of
-Newton steps (so both sides of a change do the same work).
+Newton steps (so both sides of a change do the same work). The phase
+columns (Solution.phase_times, of the best repeat) say where the time went.
 
     python bench/solve_times.py [--scenes realistic_biceps fusiform_20k arm_r5] [--threads 1]
         [--repeats 3] [--emu-iterations 10]
@@ -28,18 +29,22 @@ def main(argv=None):
     emu.runtime.set_threads(a.threads)
     i = emu.info()
     print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {a.threads}; {time.strftime('%Y-%m-%d')}\n")
-    print("| scene | method | iterations / CG | best solve s |")
-    print("|---|---|---|---|")
+    phases = ("hessian", "preconditioner", "linear_solve", "line_search", "step", "other")  # Solution.phase_times
+    print("| scene | method | iterations / CG | best solve s | " + " | ".join(phases) + " |")
+    print("|---|---|---|---|" + "---|" * len(phases))
     for name in a.scenes:
         scene, act, normalized = SCENES[name]()
         for method, kw in (("fem", {}), ("emu", dict(alpha=a.alpha, error_estimate=False,
                                                       max_iterations=a.emu_iterations))):
             solver = emu.Solver(scene, method, **kw)
-            best = float("inf")
+            best = None
             for _ in range(a.repeats):
                 sol = solver.solve(act, normalized=normalized)
-                best = min(best, sol.time_s)
-            print(f"| {name} | {method} | {sol.iterations} / {sol.cg_iterations} | {best:.3f} |", flush=True)
+                if best is None or sol.time_s < best.time_s:
+                    best = sol
+            cells = " | ".join(f"{best.phase_times[p]:.3f}" for p in phases)
+            print(f"| {name} | {method} | {best.iterations} / {best.cg_iterations} | {best.time_s:.3f} | {cells} |",
+                  flush=True)
 
 
 if __name__ == "__main__":

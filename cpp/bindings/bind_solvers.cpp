@@ -133,7 +133,15 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space)
       .def_readwrite("recycled_directions", &EmuOptions::recycled_directions);
 
+  py::class_<PhaseTimes>(m, "PhaseTimes")
+      .def_readonly("hessian", &PhaseTimes::hessian)
+      .def_readonly("preconditioner", &PhaseTimes::preconditioner)
+      .def_readonly("linear_solve", &PhaseTimes::linear_solve)
+      .def_readonly("line_search", &PhaseTimes::line_search)
+      .def_readonly("step", &PhaseTimes::step);
+
   py::class_<SolveResult>(m, "SolveResult")
+      .def_readonly("phases", &SolveResult::phases)
       .def_readonly("positions", &SolveResult::positions)
       .def_readonly("F", &SolveResult::F)
       .def_readonly("converged", &SolveResult::converged)

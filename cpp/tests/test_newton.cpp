@@ -22,7 +22,7 @@ struct ConvexProblem {
   }
   double energy() const { return f(x); }
   double grad_norm() const { return grad(x).norm(); }
-  SearchDirection direction(int it) {
+  SearchDirection direction(int it, PhaseTimes& /*time*/) {
     if (it == fail_iteration) return SearchDirection().fail("test failure");
     Eigen::MatrixXd H = Q;
     H.diagonal() += Eigen::VectorXd(x.array().exp());
@@ -174,8 +174,8 @@ TEST(newton_driver_stalls_when_no_step_helps) {
   // An ascent "direction" that the problem claims is descent: no step lowers
   // the energy or the gradient, so the solve stops as stalled (never loops).
   struct Liar : ConvexProblem {
-    SearchDirection direction(int it) {
-      SearchDirection dir = ConvexProblem::direction(it);
+    SearchDirection direction(int it, PhaseTimes& time) {
+      SearchDirection dir = ConvexProblem::direction(it, time);
       d = -d;
       dir.slope = -std::abs(dir.slope);
       return dir;

@@ -55,6 +55,12 @@ class Solution:
                 the FEM energy at EMU's positions (docs/DESIGN.md: how it was
                 validated); None for FEM, or where it is not available
                 (error_estimate_note says why)
+    phase_times seconds per phase of the solve: hessian (element Hessian
+                blocks; FEM: and their assembly), preconditioner (EMU: its
+                rebuilds and the bone coarse space), linear_solve (FEM:
+                factorisations and back-substitutions; EMU: CG), line_search,
+                step (the accepted step and its gradient), other (the rest
+                of time_s); error_estimate_time_s comes on top
     """
     method: str
     positions: np.ndarray
@@ -78,6 +84,7 @@ class Solution:
     error_estimate: float | None = None
     error_estimate_time_s: float = 0.0
     error_estimate_note: str = ""
+    phase_times: dict = field(default_factory=dict, repr=False)
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
@@ -97,6 +104,16 @@ class Solution:
                 label += "_schur"
             return label
         return self.method
+
+
+PHASES = ("hessian", "preconditioner", "linear_solve", "line_search", "step")
+
+
+def _phase_times(r) -> dict:
+    """Solution.phase_times from a core SolveResult: its phases and the rest of time_s."""
+    times = {name: float(getattr(r.phases, name)) for name in PHASES}
+    times["other"] = max(0.0, float(r.time_s) - sum(times.values()))
+    return times
 
 
 class Solver:
@@ -339,6 +356,7 @@ class Solver:
         target = self.accuracy
         total_s, estimate_s, attempts = sol.time_s, sol.error_estimate_time_s, 1
         iterations, cg, histories = sol.iterations, sol.cg_iterations, [sol.history]
+        phases = dict(sol.phase_times)
         while (sol.converged and sol.error_estimate is not None and sol.error_estimate > ACCEPT * target
                and attempts < MAX_ALPHA_ATTEMPTS):
             factor = min(30.0, max(1.5, (sol.error_estimate / (AIM * target)) ** (1 / 0.75)))
@@ -357,10 +375,11 @@ class Solver:
             estimate_s += sol.error_estimate_time_s
             iterations += sol.iterations
             cg += sol.cg_iterations
+            phases = {name: phases[name] + sol.phase_times[name] for name in phases}
             attempts += 1
         # totals over the solves at each alpha (history: one block per solve, times cumulative)
         sol.time_s, sol.error_estimate_time_s = total_s, estimate_s
-        sol.iterations, sol.cg_iterations = iterations, cg
+        sol.iterations, sol.cg_iterations, sol.phase_times = iterations, cg, phases
         sol.history = {k: np.concatenate([h[k] for h in histories]) for k in histories[0]}
         sol.settings["alpha_attempts"] = attempts
         if sol.error_estimate is not None and sol.error_estimate < AIM * target:
@@ -420,7 +439,8 @@ class Solver:
                         history=history, F=F, settings=settings, filtered_steps=r.filtered_steps,
                         exact_attempts_failed=r.exact_attempts_failed,
                         neutral_modes=self._neutral_modes(r), iterates=iterates, error_estimate=estimate,
-                        error_estimate_time_s=estimate_s, error_estimate_note=note)
+                        error_estimate_time_s=estimate_s, error_estimate_note=note,
+                        phase_times=_phase_times(r))
 
     def _estimate_error(self, load, positions) -> tuple:
         """(estimate, seconds, note): EMU's vertex error to FEM, estimated by the

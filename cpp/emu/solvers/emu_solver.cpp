@@ -412,7 +412,7 @@ class EmuSolver::Newton {
   const Eigen::MatrixX3d& positions() const { return x_; }
   const std::vector<NeutralMode>& neutral_modes() const { return coarse_.neutral_modes(); }
 
-  SearchDirection direction(int it) {
+  SearchDirection direction(int it, PhaseTimes& time) {
     SearchDirection dir;
     const EmuOptions& o = s_.emu_;
     const bool exact = exact_allowed_ && exact_ok_;
@@ -424,7 +424,11 @@ class EmuSolver::Newton {
     const bool refresh = !exact || it == 1 || since_refresh_ >= o.preconditioner_refresh ||
                          (cg_after_refresh_ >= 0 && last_cg_ > 1.5 * cg_after_refresh_ + 5);
     if (refresh) {
-      s_.blocks_into(c_, F_, &A_, exact ? &A_exact_ : nullptr);
+      {
+        ScopedSeconds timer(time.hessian);
+        s_.blocks_into(c_, F_, &A_, exact ? &A_exact_ : nullptr);
+      }
+      ScopedSeconds timer(time.preconditioner);
       if (s_.schur_) {
         if (!s_.schur_->update(A_)) return dir.fail("Schur-complement preconditioner could not be factorised");
       } else {
@@ -433,6 +437,7 @@ class EmuSolver::Newton {
       since_refresh_ = 0;
       cg_after_refresh_ = -1;
     } else {
+      ScopedSeconds timer(time.hessian);
       s_.blocks_into(c_, F_, nullptr, &A_exact_);
     }
     const std::vector<Mat9>& H = exact ? A_exact_ : A_;
@@ -442,7 +447,8 @@ class EmuSolver::Newton {
     };
     // The bone coarse space follows the Hessian CG uses (rebuilt every step).
     for (Mat9X& r : recycled_) s_.project_tangent(F_, r);  // tangent at the current bones
-    if (bones_ && o.bone_coarse_space)
+    if (bones_ && o.bone_coarse_space) {
+      ScopedSeconds timer(time.preconditioner);
       coarse_.build(
           F_,
           [&](Mat9X& Z) {
@@ -450,7 +456,9 @@ class EmuSolver::Newton {
             for (int u = 0; u < s_.layout_.num_soft; ++u) Z.col(u) = Fd_.col(s_.layout_.unknown_tets[u]);
           },
           product, recycled_);
+    }
     ++since_refresh_;
+    ScopedSeconds timer(time.linear_solve);  // CG and the direction's fit
     if (o.step == EmuStep::Woodbury) {
       precondition(gR_, d_);
       d_ = -d_;

@@ -158,7 +158,7 @@ class FemSolver::Newton {
   const Eigen::VectorXd& bone_gradient() const { return gb_; }
   const std::vector<NeutralMode>& neutral_modes() const { return last_neutral_; }
 
-  SearchDirection direction(int /*iteration*/) {
+  SearchDirection direction(int /*iteration*/, PhaseTimes& time) {
     SearchDirection dir;
     // Newton with the true Hessian where it is definite (near a stable
     // equilibrium). A failed attempt costs a factorisation, so after one it is
@@ -166,7 +166,11 @@ class FemSolver::Newton {
     const bool try_exact = s_.options_.exact_when_definite && (last_exact_ok_ || last_step_ == 1.0);
     bool have = false;
     if (try_exact) {
-      s_.assemble_hessian(x_, act_, true);
+      {
+        ScopedSeconds timer(time.hessian);
+        s_.assemble_hessian(x_, act_, true);
+      }
+      ScopedSeconds timer(time.linear_solve);
       if (newton_direction(true) && slope() < 0) {
         last_exact_ok_ = true;
         have = true;
@@ -177,7 +181,11 @@ class FemSolver::Newton {
     }
     if (!have) {
       ++dir.filtered;
-      s_.assemble_hessian(x_, act_, false);
+      {
+        ScopedSeconds timer(time.hessian);
+        s_.assemble_hessian(x_, act_, false);
+      }
+      ScopedSeconds timer(time.linear_solve);
       if (!filtered_direction()) return dir.fail("Newton matrix is not positive definite even after regularisation");
     }
     last_neutral_ = have ? std::vector<NeutralMode>() : neutral_;

@@ -11,7 +11,8 @@
 //
 // A Problem provides, at its current iterate:
 //   double energy() const;          double grad_norm() const;
-//   SearchDirection direction(int iteration);   // computed at the current iterate
+//   SearchDirection direction(int iteration, PhaseTimes& t);  // at the current iterate; adds
+//                                               // its hessian / preconditioner / linear_solve seconds
 //   double trial_energy(double s);              // energy at step s along it (non-finite: rejected)
 //   double trial_grad_norm();                   // gradient norm at the last trial point (round-off rule)
 //   double take_step(int iteration, double s, double E_trial);  // move to the step s of the last
@@ -70,14 +71,18 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
       res.status = "interrupted";
       break;
     }
-    const SearchDirection d = p.direction(it);
+    const SearchDirection d = p.direction(it, res.phases);
     res.filtered_steps += d.filtered;
     res.exact_attempts_failed += d.exact_failed;
     if (!d.ok) {
       res.status = d.failure;
       break;
     }
-    auto ls = armijo_backtracking([&](double s) { return p.trial_energy(s); }, E, d.slope, o);
+    LineSearchResult ls;
+    {
+      ScopedSeconds timer(res.phases.line_search);
+      ls = armijo_backtracking([&](double s) { return p.trial_energy(s); }, E, d.slope, o);
+    }
     if (!ls.success) {
       const double E1 = p.trial_energy(1.0);
       if (!accept_at_roundoff(E1, p.trial_grad_norm(), E, p.grad_norm(), conv.E0)) {
@@ -91,7 +96,10 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     }
     const double E_prev = E;
     if (o.step_tol > 0) x_prev = p.positions();
-    E = p.take_step(it, ls.step, ls.energy);
+    {
+      ScopedSeconds timer(res.phases.step);
+      E = p.take_step(it, ls.step, ls.energy);
+    }
     const double gn = p.grad_norm();
     res.iterations = it;
     res.cg_iterations += d.cg_iterations;

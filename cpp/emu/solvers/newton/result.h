@@ -20,6 +20,16 @@ struct NeutralMode {
   Eigen::Vector3d axis;  // unit rotation axis (or, for a free bone that can slide, the direction)
 };
 
+/// Seconds a solve spent per phase (time_s minus their sum: the solve's own
+/// setup, convergence tests, bookkeeping).
+struct PhaseTimes {
+  double hessian = 0;         // element Hessian blocks (FEM: and their assembly into the matrix)
+  double preconditioner = 0;  // EMU: Woodbury / Schur rebuilds and the bone coarse space
+  double linear_solve = 0;    // FEM: factorisations and back-substitutions; EMU: CG
+  double line_search = 0;     // trial energies (EMU with bones: a fit per trial)
+  double step = 0;            // moving to the accepted step and the gradient there
+};
+
 struct SolveResult {
   Eigen::MatrixX3d positions;  // #V by 3
   Eigen::MatrixXd F;           // #T by 9 deformation-gradient unknowns (EMU), empty for FEM
@@ -30,6 +40,7 @@ struct SolveResult {
   int exact_attempts_failed = 0;  // FEM: factorisations of the exact Hessian that found it indefinite
   double energy = 0, grad_norm = 0, grad_norm0 = 0, rel_energy_change = 0;
   double time_s = 0;  // solve time (setup excluded)
+  PhaseTimes phases;
   std::vector<IterationRecord> history;  // entry 0 is the initial state
   // Neutral modes met by the last step: movable bone ids and unit axes (rows).
   std::vector<int> neutral_bones;
