@@ -112,7 +112,9 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("step_tol_grad", &SolverOptions::step_tol_grad)
       .def_readwrite("max_backtracks", &SolverOptions::max_backtracks)
       .def_readwrite("eigen_filter", &SolverOptions::eigen_filter)
-      .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite);
+      .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite)
+      .def_readwrite("lagged_cg_iterations", &SolverOptions::lagged_cg_iterations)
+      .def_readwrite("lagged_cg_forcing", &SolverOptions::lagged_cg_forcing);
 
   py::enum_<EmuStep>(m, "EmuStep").value("woodbury", EmuStep::Woodbury).value("newton_krylov", EmuStep::NewtonKrylov);
 
@@ -150,6 +152,7 @@ void bind_solvers(py::module_& m) {
       .def_readonly("cg_iterations", &SolveResult::cg_iterations)
       .def_readonly("filtered_steps", &SolveResult::filtered_steps)
       .def_readonly("exact_attempts_failed", &SolveResult::exact_attempts_failed)
+      .def_readonly("factorizations", &SolveResult::factorizations)
       .def_readonly("energy", &SolveResult::energy)
       .def_readonly("grad_norm", &SolveResult::grad_norm)
       .def_readonly("grad_norm0", &SolveResult::grad_norm0)

@@ -6,6 +6,7 @@
 #include "check.h"
 #include "emu/linalg/cholmod_factor.h"
 #include "emu/linalg/modes.h"
+#include "emu/linalg/symmetric_product.h"
 
 using namespace emu;
 
@@ -60,6 +61,27 @@ TEST(cholmod_solve_matches_dense) {
   CHECK(f.factorize(x.data()));
   f.solve(b.data(), sol.data(), 3);
   CHECK((sol - 0.5 * ref).norm() <= 1e-9 * ref.norm());
+}
+
+TEST(symmetric_upper_product_matches_dense) {
+  // A random symmetric matrix on the grid pattern (diagonal and off-diagonal
+  // entries of mixed sign), stored as its upper triangle.
+  std::vector<int> p, i;
+  std::vector<double> x;
+  Eigen::MatrixXd K;
+  grid_laplacian(7, 0.3, p, i, x, K);
+  const int n = static_cast<int>(K.rows());
+  std::srand(4);
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(n, n);
+  for (int col = 0; col < n; ++col)
+    for (int k = p[col]; k < p[col + 1]; ++k) {
+      x[k] = Eigen::VectorXd::Random(1)(0);
+      A(i[k], col) = A(col, i[k]) = x[k];
+    }
+  const Eigen::VectorXd v = Eigen::VectorXd::Random(n);
+  Eigen::VectorXd y = Eigen::VectorXd::Constant(n, 7.0);  // overwritten, not accumulated
+  symmetric_upper_product(n, p.data(), i.data(), x.data(), v.data(), y.data());
+  CHECK((y - A * v).norm() <= 1e-13 * (A * v).norm());
 }
 
 TEST(cholmod_reports_indefinite) {

@@ -79,6 +79,7 @@ class Solution:
     settings: dict = field(default_factory=dict)
     filtered_steps: int = 0          # iterations that fell back to the PSD-filtered Hessian
     exact_attempts_failed: int = 0   # FEM: factorisations that found the exact Hessian indefinite
+    factorizations: int = 0          # sparse Cholesky factorisations of a Newton matrix (FEM)
     neutral_modes: list = field(default_factory=list)  # [(bone, unit axis)] turns nothing resists
     iterates: list | None = field(default=None, repr=False)
     error_estimate: float | None = None
@@ -103,7 +104,7 @@ class Solution:
             if self.settings.get("preconditioner") == "schur":
                 label += "_schur"
             return label
-        return self.method
+        return "fem_lagged_cg" if self.settings.get("lagged_factor") else self.method
 
 
 PHASES = ("hessian", "preconditioner", "linear_solve", "line_search", "step")
@@ -156,6 +157,12 @@ class Solver:
                   warm-started at a larger alpha when it is not, and carries
                   the alpha over to the next solve (``solver.alpha``)
 
+    lagged_factor FEM: Newton-CG preconditioned by the last Cholesky factor, kept
+                  across iterations and solves (the frames of a sequence); a
+                  factorisation only when PCG does not converge within
+                  ``lagged_cg_iterations`` (a stronger FEM baseline where the
+                  Newton matrix changes little: docs/DESIGN.md)
+
     fibers        (m, 3) the rest fibre direction per tet of the scene the model
                   was built with (emu.lowering.tet_fibers); the scene is not changed
     """
@@ -165,7 +172,8 @@ class Solver:
                  max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "woodbury",
                  preconditioner_refresh: int = 3, bone_coarse_space: bool = True,
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
-                 error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 0):
+                 error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 0,
+                 lagged_factor: bool = False, lagged_cg_iterations: int = 25):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
@@ -203,6 +211,13 @@ class Solver:
         self.mu_ref = scene.reference_shear_modulus()
         self.settings = dict(method=method, rtol_grad=rtol_grad, rtol_energy=rtol_energy,
                              max_iterations=int(max_iterations), accuracy=self.accuracy)
+        if lagged_factor:
+            if method != "fem":
+                raise ValueError("lagged_factor is a FEM option (EMU factorises nothing per iteration)")
+            if int(lagged_cg_iterations) < 1:
+                raise ValueError(f"lagged_cg_iterations must be >= 1, got {lagged_cg_iterations}")
+            opts.lagged_cg_iterations = int(lagged_cg_iterations)
+            self.settings.update(lagged_factor=True, lagged_cg_iterations=int(lagged_cg_iterations))
         if method == "fem":
             self._core = _core.FemSolver(self.model, opts)
         else:
@@ -437,7 +452,7 @@ class Solver:
                         time_s=r.time_s, setup_time_s=self.setup_time_s, energy=r.energy,
                         grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
                         history=history, F=F, settings=settings, filtered_steps=r.filtered_steps,
-                        exact_attempts_failed=r.exact_attempts_failed,
+                        exact_attempts_failed=r.exact_attempts_failed, factorizations=r.factorizations,
                         neutral_modes=self._neutral_modes(r), iterates=iterates, error_estimate=estimate,
                         error_estimate_time_s=estimate_s, error_estimate_note=note,
                         phase_times=_phase_times(r))

@@ -7,6 +7,8 @@
 
 #include "emu/energy/gravity_work.h"
 #include "emu/energy/material.h"
+#include "emu/linalg/symmetric_product.h"
+#include "emu/solvers/newton/pcg.h"
 #include "emu/solvers/newton/newton_driver.h"
 
 namespace emu {
@@ -149,6 +151,7 @@ class FemSolver::Newton {
     E_ = s_.energy_with(x_, act_, load_.gravity) + s_.bones_.spring_energy(poses_);
     reduced_gradient(x_, poses_, gs_, gb_);
     gn_ = s_.bones_.gradient_norm(gs_.squaredNorm(), gb_);
+    g0_ = gn_;
   }
 
   double energy() const { return E_; }
@@ -164,6 +167,23 @@ class FemSolver::Newton {
     // equilibrium). A failed attempt costs a factorisation, so after one it is
     // retried only once the iteration is in the Newton regime (last step full).
     const bool try_exact = s_.options_.exact_when_definite && (last_exact_ok_ || last_step_ == 1.0);
+    const int factorizations0 = s_.factorizations_;
+    if (s_.options_.lagged_cg_iterations > 0 && s_.lag_.valid) {
+      // Newton-CG on the lagged factor, to the forcing term of EMU's CG
+      // (Eisenstat-Walker); a factorisation only when that does not converge.
+      {
+        ScopedSeconds timer(time.hessian);
+        s_.assemble_hessian(x_, act_, try_exact);
+      }
+      ScopedSeconds timer(time.linear_solve);
+      const double eta = std::min(s_.options_.lagged_cg_forcing, std::sqrt(gn_ / g0_));
+      if (lagged_direction(try_exact, eta * gn_, dir.cg_iterations) && slope() < 0) {
+        if (!try_exact) ++dir.filtered;
+        last_neutral_.clear();
+        dir.slope = slope();
+        return dir;
+      }
+    }
     bool have = false;
     if (try_exact) {
       {
@@ -190,6 +210,7 @@ class FemSolver::Newton {
     }
     last_neutral_ = have ? std::vector<NeutralMode>() : neutral_;
     neutral_.clear();
+    dir.factorizations = s_.factorizations_ - factorizations0;
     dir.slope = slope();
     if (!(dir.slope < 0)) return dir.fail("Newton direction is not a descent direction");
     return dir;
@@ -271,11 +292,14 @@ class FemSolver::Newton {
   // The Newton direction from the assembled soft block and the bone border;
   // false if the matrix is not positive definite.
   bool newton_direction(bool exact) {
+    ++s_.factorizations_;
+    s_.lag_.valid = false;  // the factor is being replaced
     if (!s_.factor_.factorize(s_.values_.data())) return false;
     y_.resize(gs_.size());
     s_.factor_.solve(gs_.data(), y_.data(), 1);
     if (!nd_) {
       ds_ = -y_;
+      s_.lag_.valid = true;
       return true;
     }
     border(exact, Hsb_, Hbb_);
@@ -286,6 +310,58 @@ class FemSolver::Newton {
     const Eigen::VectorXd rb = -gb_ + Hsb_.transpose() * y_;
     if (!s_.bones_.solve_schur(S, rb, exact, db_, neutral_)) return false;
     ds_ = -y_ - Wsb_ * db_;
+    keep_bone_border(S);
+    return true;
+  }
+
+  // The bone border of the factorisation just made, for lagged_direction; a
+  // singular bone Schur complement (a neutral mode) leaves no preconditioner.
+  void keep_bone_border(const Eigen::MatrixXd& S) {
+    Eigen::LLT<Eigen::MatrixXd> llt(S);
+    if (llt.info() != Eigen::Success || !neutral_.empty()) return;
+    s_.lag_.Hsb = Hsb_;
+    s_.lag_.Wsb = Wsb_;
+    s_.lag_.S_inv = llt.solve(Eigen::MatrixXd::Identity(nd_, nd_));
+    s_.lag_.valid = true;
+  }
+
+  // Newton-CG with the lagged factor as preconditioner (SolverOptions::
+  // lagged_cg_iterations): PCG on the current Newton matrix (soft block K from
+  // the assembled values, bone border Hsb, Hbb) to |r| <= tol, the inverse of
+  // the factorised matrix applied by block elimination:
+  //   y_s = K_lag^-1 r_s,  z_b = S_lag^-1 (r_b - Hsb_lag^T y_s),  z_s = y_s - K_lag^-1 Hsb_lag z_b.
+  // False (nothing changed) if it does not converge within the cap or meets
+  // negative curvature: the caller factorises instead.
+  bool lagged_direction(bool exact, double tol, int& cg_iterations) {
+    const FemSolver::LaggedFactor& lag = s_.lag_;
+    if (!lag.valid) return false;
+    const Eigen::Index ns = gs_.size();
+    if (nd_) border(exact, Hsb_, Hbb_);
+    auto product = [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
+      out.resize(v.size());
+      const BlockPattern& P = s_.pattern_;
+      symmetric_upper_product(P.rows(), P.col_ptr().data(), P.row_index().data(), s_.values_.data(), v.data(),
+                              out.data());
+      if (!nd_) return;
+      out.head(ns).noalias() += Hsb_ * v.tail(nd_);
+      out.tail(nd_).noalias() = Hsb_.transpose() * v.head(ns) + Hbb_ * v.tail(nd_);
+    };
+    auto precondition = [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
+      z.resize(r.size());
+      s_.factor_.solve(r.data(), z.data(), 1);
+      if (!nd_) return;
+      const Eigen::VectorXd zb = lag.S_inv * (r.tail(nd_) - lag.Hsb.transpose() * z.head(ns));
+      z.head(ns).noalias() -= lag.Wsb * zb;
+      z.tail(nd_) = zb;
+    };
+    Eigen::VectorXd b(ns + nd_), d;
+    b.head(ns) = -gs_;
+    if (nd_) b.tail(nd_) = -gb_;
+    const PcgResult cg = pcg_.solve(product, precondition, b, tol, s_.options_.lagged_cg_iterations, d);
+    cg_iterations = cg.iterations;
+    if (!cg.converged) return false;
+    ds_ = d.head(ns);
+    if (nd_) db_ = d.tail(nd_);
     return true;
   }
 
@@ -314,7 +390,8 @@ class FemSolver::Newton {
   BonePoses poses_, trial_poses_;
   Eigen::VectorXd gs_, gb_, ds_, db_, y_;
   Eigen::MatrixXd Hsb_, Wsb_, Hbb_;
-  double E_ = 0, gn_ = 0, last_step_ = 0;
+  Pcg<Eigen::VectorXd> pcg_;
+  double E_ = 0, gn_ = 0, g0_ = 0, last_step_ = 0;
   bool last_exact_ok_ = true, last_exact_ = false;
   std::vector<NeutralMode> neutral_, last_neutral_;  // of the current / last step
 };

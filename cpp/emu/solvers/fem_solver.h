@@ -92,6 +92,16 @@ class FemSolver {
   RigidBones bones_;
   std::vector<double> element_, values_;
   mutable std::vector<double> corner_, tet_energy_;
+  // The last successful factorisation, kept as Newton-CG's preconditioner
+  // (SolverOptions::lagged_cg_iterations) across steps and solves: the factor
+  // is factor_; with movable bones also its border Hsb, K^-1 Hsb and the
+  // inverse of its bone Schur complement.
+  struct LaggedFactor {
+    bool valid = false;
+    Eigen::MatrixXd Hsb, Wsb, S_inv;
+  };
+  LaggedFactor lag_;
+  int factorizations_ = 0;  // numeric factorisations of the Newton matrix so far
   double setup_seconds_ = 0;
 };
 

@@ -28,6 +28,13 @@ struct SolverOptions {
   // Cholesky succeeds; EMU: CG sees no negative curvature); fall back to the
   // filtered one. Restores Newton's quadratic end game.
   bool exact_when_definite = true;
+  // FEM: Newton-CG preconditioned by the last factorisation, kept across
+  // iterations and solves (frames); a step runs PCG on the current Newton
+  // matrix for at most this many iterations to |r| <= eta |g| (eta =
+  // min(lagged_cg_forcing, sqrt(|g| / |g_0|))) and factorises afresh only when
+  // that fails. 0: off (a factorisation every iteration).
+  int lagged_cg_iterations = 0;
+  double lagged_cg_forcing = 0.5;
   // Polled once per iteration; returning true stops the solve with status
   // "interrupted" (the Python bindings use it for Ctrl-C).
   std::function<bool()> interrupted;

@@ -35,6 +35,7 @@ struct SearchDirection {
   int cg_iterations = 0;
   int filtered = 0;        // 1 if the step fell back to the PSD-filtered Hessian
   int exact_failed = 0;    // failed factorisations of the exact Hessian
+  int factorizations = 0;  // sparse Cholesky factorisations made for it
   /// This direction marked as failed (its counters kept for the result).
   SearchDirection& fail(std::string why) {
     ok = false;
@@ -74,6 +75,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     const SearchDirection d = p.direction(it, res.phases);
     res.filtered_steps += d.filtered;
     res.exact_attempts_failed += d.exact_failed;
+    res.factorizations += d.factorizations;
     if (!d.ok) {
       res.status = d.failure;
       break;

@@ -21,6 +21,7 @@ namespace emu {
 struct PcgResult {
   int iterations = 0;              // products with H that moved the iterate
   bool negative_curvature = false;
+  bool converged = false;          // |r| <= tol reached
 };
 
 template <class Vec>
@@ -58,7 +59,10 @@ class Pcg {
         return rr[k] * rr[k];
       });
       ++res.iterations;
-      if (std::sqrt(rr2) <= tol) break;
+      if (std::sqrt(rr2) <= tol) {
+        res.converged = true;
+        break;
+      }
       precondition(r_, z_);
       const double rz_new = inner(r_, z_);
       const double beta = rz_new / rz;

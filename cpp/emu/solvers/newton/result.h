@@ -38,6 +38,7 @@ struct SolveResult {
   int iterations = 0, cg_iterations = 0;
   int filtered_steps = 0;  // iterations that needed the PSD-filtered Hessian (not the exact one)
   int exact_attempts_failed = 0;  // FEM: factorisations of the exact Hessian that found it indefinite
+  int factorizations = 0;  // sparse Cholesky factorisations of a Newton matrix (FEM; EMU's Schur rebuilds)
   double energy = 0, grad_norm = 0, grad_norm0 = 0, rel_energy_change = 0;
   double time_s = 0;  // solve time (setup excluded)
   PhaseTimes phases;

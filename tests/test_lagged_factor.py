@@ -1,0 +1,76 @@
+"""FEM Newton-CG on a lagged Cholesky factor (Solver(method="fem",
+lagged_factor=True)): the same equilibrium as Newton with a factorisation per
+iteration, far fewer factorisations, the factor reused across the solves of a
+sequence."""
+from __future__ import annotations
+
+import pytest
+
+import emu
+from conftest import SMALL_KINDS
+
+
+@pytest.fixture(scope="module", params=list(SMALL_KINDS))
+def kind(request):
+    make, act, normalized = SMALL_KINDS[request.param]
+    return make(), act, normalized
+
+
+def test_lagged_factor_reaches_the_direct_answer_with_fewer_factorizations(kind):
+    scene, act, normalized = kind
+    direct = emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized)
+    lagged = emu.Solver(scene, "fem", rtol_grad=1e-9, lagged_factor=True).solve(act, normalized=normalized)
+    assert direct.converged and lagged.converged, (direct.status, lagged.status)
+    assert emu.vertex_error(lagged.positions, direct.positions) < 1e-7
+    assert direct.cg_iterations == 0 and direct.factorizations >= direct.iterations
+    assert lagged.cg_iterations > 0
+    assert lagged.factorizations <= direct.factorizations / 2
+    assert lagged.label == "fem_lagged_cg" and direct.label == "fem"
+
+
+def test_lagged_factor_is_reused_across_the_frames_of_a_sequence(kind):
+    # A small change of activation, warm-started: the factor from the first
+    # solve preconditions the second without a new factorisation.
+    scene, act, normalized = kind
+    solver = emu.Solver(scene, "fem", lagged_factor=True)
+    first = solver.solve(act, normalized=normalized)
+    nudged = {m: 1.02 * a for m, a in act.items()}
+    second = solver.solve(nudged, normalized=normalized, initial=first)
+    direct = emu.Solver(scene, "fem").solve(nudged, normalized=normalized, initial=first)
+    assert first.factorizations >= 1
+    assert second.converged and second.factorizations == 0 and second.cg_iterations > 0
+    assert emu.vertex_error(second.positions, direct.positions) < 1e-5
+
+
+def test_a_one_iteration_cap_still_converges_by_factorising():
+    # PCG capped at one iteration cannot reach the forcing term on the first
+    # steps: those steps factorise, and the answer is the direct one.
+    make, act, normalized = SMALL_KINDS["fusiform (pinned, tendons)"]
+    scene = make()
+    direct = emu.Solver(scene, "fem").solve(act, normalized=normalized)
+    capped = emu.Solver(scene, "fem", lagged_factor=True, lagged_cg_iterations=1).solve(act, normalized=normalized)
+    assert capped.converged
+    assert capped.factorizations > 1
+    assert emu.vertex_error(capped.positions, direct.positions) < 1e-5
+
+
+def test_lagged_factor_options_are_checked():
+    make, _, _ = SMALL_KINDS["fusiform (pinned, tendons)"]
+    scene = make()
+    with pytest.raises(ValueError, match="lagged_factor is a FEM option"):
+        emu.Solver(scene, "emu", lagged_factor=True)
+    with pytest.raises(ValueError, match="lagged_cg_iterations must be >= 1"):
+        emu.Solver(scene, "fem", lagged_factor=True, lagged_cg_iterations=0)
+
+
+def test_phase_times_account_for_the_solve(kind):
+    scene, act, normalized = kind
+    for method in ("fem", "emu"):
+        sol = emu.Solver(scene, method, alpha=100, error_estimate=False).solve(act, normalized=normalized)
+        t = sol.phase_times
+        assert set(t) == {"hessian", "preconditioner", "linear_solve", "line_search", "step", "other"}
+        assert all(v >= 0 for v in t.values())
+        assert sum(t.values()) == pytest.approx(sol.time_s, rel=1e-6, abs=1e-9)
+        assert t["linear_solve"] > 0 and t["hessian"] > 0
+        if method == "fem":
+            assert t["preconditioner"] == 0
