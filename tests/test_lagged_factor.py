@@ -74,3 +74,17 @@ def test_phase_times_account_for_the_solve(kind):
         assert t["linear_solve"] > 0 and t["hessian"] > 0
         if method == "fem":
             assert t["preconditioner"] == 0
+
+
+def test_error_estimate_on_the_lagged_factor_matches_a_fresh_factorisation(kind):
+    # The second solve's estimate reuses the first's factor (PCG to 1e-3 |g|);
+    # a new solver estimates the same state with a factorisation of its own.
+    scene, act, normalized = kind
+    solver = emu.Solver(scene, "emu", alpha=100)
+    first = solver.solve(act, normalized=normalized)
+    nudged = {m: 1.05 * a for m, a in act.items()}
+    second = solver.solve(nudged, normalized=normalized, initial=first)
+    fresh = emu.Solver(scene, "emu", alpha=100)
+    fresh_estimate, _, note = fresh._estimate_error(fresh.load_case(nudged, normalized), second.positions)
+    assert note == "" and second.error_estimate is not None
+    assert second.error_estimate == pytest.approx(fresh_estimate, rel=1e-2)

@@ -36,6 +36,9 @@ ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS, ACCURACY_CG_FORCING = 0.6, 0.4, 
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
 # ... and the step test applies once |g| <= STEP_GRAD |g_0| (measured: docs/DESIGN.md)
 STEP_GRAD = 1e-2
+# The error estimate's FEM corrections: PCG on the last factorisation for at
+# most this many iterations before factorising (SolverOptions::lagged_cg_iterations)
+ESTIMATE_LAGGED_CG = 25
 HISTORY_COLUMNS = ("iteration", "energy", "grad_norm", "step", "time_s", "cg_iterations", "backtracks")
 
 
@@ -466,6 +469,9 @@ class Solver:
         t0 = time.perf_counter()
         if self._estimator is None and not self._estimator_error:
             opts = _core.SolverOptions()
+            # the corrections of a sequence's frames (and of accuracy mode's
+            # re-solves) by PCG on the last factorisation (docs/DESIGN.md)
+            opts.lagged_cg_iterations = ESTIMATE_LAGGED_CG
             try:
                 self._estimator = _core.FemSolver(self.model, opts)
             except ValueError as e:   # e.g. a joint between two movable bones

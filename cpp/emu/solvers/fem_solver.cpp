@@ -132,6 +132,12 @@ double FemSolver::gradient_floor(const Eigen::VectorXd& act) const {
   return 1e-13 * force_scale;
 }
 
+namespace {
+// newton_correction with a lagged factor: PCG to this fraction of the
+// gradient (the correction, an error estimate, needs a few digits).
+constexpr double kCorrectionResidual = 1e-3;
+}  // namespace
+
 // One FEM solve as the Newton driver sees it. The iterate is the positions x
 // with the bones' poses; the gradient in the reduced unknowns is gs (free soft
 // rows) and gb (bone rows).
@@ -265,6 +271,10 @@ class FemSolver::Newton {
   bool correction_direction(bool exact) {
     s_.assemble_hessian(x_, act_, exact);
     last_exact_ = exact;
+    int cg = 0;  // with a lagged factor, PCG first (SolverOptions::lagged_cg_iterations)
+    if (s_.options_.lagged_cg_iterations > 0 && lagged_direction(true, kCorrectionResidual * gn_, cg) &&
+        slope() < 0)
+      return true;
     if (newton_direction(true) && slope() < 0) return true;
     last_exact_ = false;
     s_.assemble_hessian(x_, act_, false);
@@ -332,11 +342,11 @@ class FemSolver::Newton {
   //   y_s = K_lag^-1 r_s,  z_b = S_lag^-1 (r_b - Hsb_lag^T y_s),  z_s = y_s - K_lag^-1 Hsb_lag z_b.
   // False (nothing changed) if it does not converge within the cap or meets
   // negative curvature: the caller factorises instead.
-  bool lagged_direction(bool exact, double tol, int& cg_iterations) {
+  bool lagged_direction(bool exact_border, double tol, int& cg_iterations) {
     const FemSolver::LaggedFactor& lag = s_.lag_;
     if (!lag.valid) return false;
     const Eigen::Index ns = gs_.size();
-    if (nd_) border(exact, Hsb_, Hbb_);
+    if (nd_) border(exact_border, Hsb_, Hbb_);
     auto product = [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
       out.resize(v.size());
       const BlockPattern& P = s_.pattern_;
