@@ -13,6 +13,7 @@ def _research(name, free_bones=()):
 SCENES = {
     "fusiform_r3": lambda: (emu.scenes.fusiform(3, warn=False), {"belly": 5e4}, False),
     "fusiform_20k": lambda: (emu.scenes.fusiform(tets=20000, warn=False), {"belly": 5e4}, False),
+    "fusiform_80k": lambda: (emu.scenes.fusiform(tets=80000, warn=False), {"belly": 5e4}, False),
     "simple_joint": lambda: (_research("simple_joint"), {"muscle": 1e4}, False),
     "simple_joint_free": lambda: (_research("simple_joint", ["bottom_bone"]), {"muscle": 1e4}, False),
     "big_muscle_free": lambda: (_research("big_muscle", ["bone_2"]), {"muscle": 1e4}, False),

@@ -79,3 +79,15 @@ def test_hard_isometric_small():
     shared_raw()
     out = run(BENCH / "hard_isometric.py", "--activations", "2e3", "--activation", "2e3", "--alphas", "1000")
     assert "| 2000 |" in out and "| 1000 |" in out and "| yes |" in out   # FEM from EMU's answer: the same equilibrium
+
+
+def test_fem_baselines_small():
+    out = run(BENCH / "fem_baselines.py", "--scenes", "fusiform_r3", "--caps", "10", "--frames", "3",
+              "--resolution", "1")
+    rows = [line for line in out.splitlines() if line.startswith("| fusiform_r3 |")]
+    assert len(rows) == 2 and "factorisation per iteration" in rows[0] and "PCG cap 10" in rows[1]
+    assert "NOT converged" not in out
+    apart = float(rows[1].split("|")[-2])
+    assert apart < 1e-6                      # the lagged factor reaches the same answer
+    for label in ("EMU (demo settings)", "FEM lagged factor", "FEM accuracy 0.01"):
+        assert f"| {label} |" in out

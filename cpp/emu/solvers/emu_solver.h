@@ -92,6 +92,7 @@ class EmuSolver {
  private:
   struct Context;  // per-load data: activations, pinned share of F, joint targets, gravity terms
   class Newton;    // one solve's state, as the Newton driver sees it (emu_solver.cpp)
+  friend struct EmuSolverProbe;  // bench/micro/bench_cg.cpp: times the kernels of a CG iteration
   Context make_context(const LoadCase& load) const;
   /// The round-off level of the gradient norm (see Convergence).
   double gradient_floor(const Context& c) const;

@@ -1,0 +1,163 @@
+// Microbenchmarks of one EMU CG iteration and its kernels (Google Benchmark)
+// on a pinned bar of about 17k tets (the size of bench_scenes' fusiform_20k),
+// alpha = 100 mu, near-rest F with noise, 1 thread unless OMP_NUM_THREADS:
+//   build/micro/bench_cg [--benchmark_filter=woodbury]
+// bytes_per_second counts the traffic each kernel streams as written (every
+// per-tet array it reads or writes once per pass; vertex-sized arrays, which
+// stay in cache, left out), so it reads directly against the STREAM triad of
+// bench_kernels: near it, the kernel is at its memory-traffic bound.
+#include <memory>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+
+#include "bar_model.h"
+#include "emu/solvers/acap.h"
+#include "emu/solvers/emu_solver.h"
+#include "emu/solvers/newton/pcg.h"
+#include "emu/solvers/woodbury.h"
+
+namespace emu {
+
+/// Access to the solver's kernels (a friend of EmuSolver).
+struct EmuSolverProbe {
+  explicit EmuSolverProbe(const Model& m) {
+    EmuOptions eo;
+    eo.alpha = 100.0 * m.mu(0);
+    solver = std::make_unique<EmuSolver>(m, SolverOptions(), eo);
+    const long n = solver->layout_.num_unknowns;
+    std::mt19937 rng(2);
+    std::normal_distribution<double> g(0.0, 0.05);
+    Eigen::MatrixXd F(n, 9);
+    for (long u = 0; u < n; ++u)
+      for (int i = 0; i < 9; ++i) F(u, i) = (i % 4 == 0 ? 1.0 : 0.0) + g(rng);
+    LoadCase load;
+    load.activation = Eigen::VectorXd::Constant(1, 1e4);
+    const Eigen::MatrixXd blocks = solver->block_hessians(load, F, false);
+    A.resize(n);
+    for (long u = 0; u < n; ++u)
+      for (int i = 0; i < 81; ++i) A[u].data()[i] = blocks(u, i);  // a row: the column-major 9x9 block
+    if (!solver->woodbury_->update(A)) throw std::runtime_error("bench_cg: the Woodbury matrix X is not definite");
+    v = Mat9X::Zero(9, n);
+    for (long i = 0; i < v.size(); ++i) v.data()[i] = g(rng);
+  }
+  void product(const Mat9X& in, Mat9X& out) const { solver->hessian_product_into(A, in, out); }
+  void fit(const Mat9X& in) {
+    solver->fit_linear_into(in, dx, Fd);
+  }
+  void precondition(const Mat9X& in, Mat9X& out) const { solver->woodbury_->apply(in, out); }
+  void back_substitution(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& Z) const { solver->acap_->solve(rhs, Z); }
+  long position_dofs() const { return solver->acap_->dofs(); }
+  long unknowns() const { return solver->layout_.num_unknowns; }
+  int modes() const { return solver->woodbury_->k(); }
+
+  std::unique_ptr<EmuSolver> solver;
+  std::vector<Mat9> A;
+  Mat9X v, Fd;
+  Eigen::MatrixX3d dx;
+};
+
+}  // namespace emu
+
+using namespace emu;
+
+namespace {
+EmuSolverProbe& probe() {
+  static EmuSolverProbe p(bar(8, 45));  // 8 x 8 x 45 hexes: 17,280 tets
+  return p;
+}
+
+constexpr double kB = 8.0;  // bytes per double
+// Per-tet doubles streamed (see the header comment):
+// fit: v read (9), corner targets written and gathered (12 + 12), F_t of the fit written (9)
+constexpr double kFit = 9 + 24 + 9;
+// H product: the fit, then A (81), v, F_t(fit) read and the result written (9 each)
+constexpr double kProduct = kFit + 81 + 27;
+// Woodbury: A^-1 r (81 + 9 + 9), its corner targets (24 + 9 read), the
+// correction's per-tet values (9 written, 9 + 9 reduced), A^-1 of it added (81 + 9 + 18)
+constexpr double kWoodbury = 99 + 33 + 27 + 108;
+// PCG's vector work: d, r updated with |r|^2 (4 read, 2 written), r.z and p (3 read, 1 written)
+constexpr double kVectors = 6 + 4;
+
+void report(benchmark::State& state, double per_tet) {
+  const double n = static_cast<double>(probe().unknowns());
+  state.SetItemsProcessed(state.iterations() * static_cast<long>(n));
+  state.SetBytesProcessed(static_cast<long>(state.iterations() * n * per_tet * kB));
+  state.counters["tets"] = n;
+}
+
+void fit(benchmark::State& state) {
+  EmuSolverProbe& p = probe();
+  for (auto _ : state) {
+    p.fit(p.v);
+    benchmark::DoNotOptimize(p.Fd.data());
+  }
+  report(state, kFit);
+}
+
+void back_substitution(benchmark::State& state) {
+  EmuSolverProbe& p = probe();
+  // The ACAP fit's solve: K_c^-1 R with 3 right-hand sides (L (x) I3).
+  const Eigen::MatrixXd rhs = Eigen::MatrixXd::Random(p.position_dofs(), 3);
+  Eigen::MatrixXd Z;
+  for (auto _ : state) {
+    p.back_substitution(rhs, Z);
+    benchmark::DoNotOptimize(Z.data());
+  }
+  state.SetItemsProcessed(state.iterations() * p.position_dofs());
+  state.counters["rows"] = static_cast<double>(p.position_dofs());
+  state.counters["factor_nnz"] = p.solver->factor_nnz();
+}
+
+void hessian_product(benchmark::State& state) {
+  EmuSolverProbe& p = probe();
+  Mat9X out;
+  for (auto _ : state) {
+    p.product(p.v, out);
+    benchmark::DoNotOptimize(out.data());
+  }
+  report(state, kProduct);
+}
+
+void woodbury_apply(benchmark::State& state) {
+  EmuSolverProbe& p = probe();
+  Mat9X out;
+  for (auto _ : state) {
+    p.precondition(p.v, out);
+    benchmark::DoNotOptimize(out.data());
+  }
+  report(state, kWoodbury);
+  state.counters["modes"] = p.modes();
+}
+
+// Whole PCG iterations (tolerance 0: none stops early), items = iterations x tets.
+void cg_iteration(benchmark::State& state) {
+  EmuSolverProbe& p = probe();
+  Pcg<Mat9X> pcg;
+  Mat9X d;
+  const int iterations = 20;
+  for (auto _ : state) {
+    const PcgResult r = pcg.solve([&](const Mat9X& in, Mat9X& out) { p.product(in, out); },
+                                  [&](const Mat9X& in, Mat9X& out) { p.precondition(in, out); }, p.v, 0.0,
+                                  iterations, d);
+    if (r.iterations != iterations) {
+      state.SkipWithError("PCG stopped early (negative curvature)");
+      break;
+    }
+    benchmark::DoNotOptimize(d.data());
+  }
+  const double n = static_cast<double>(p.unknowns());
+  state.SetItemsProcessed(state.iterations() * iterations * static_cast<long>(n));
+  state.SetBytesProcessed(static_cast<long>(state.iterations() * iterations * n * (kProduct + kWoodbury + kVectors) * kB));
+  state.counters["tets"] = n;
+}
+}  // namespace
+
+BENCHMARK(fit)->Unit(benchmark::kMicrosecond);
+BENCHMARK(back_substitution)->Unit(benchmark::kMicrosecond);
+BENCHMARK(hessian_product)->Unit(benchmark::kMicrosecond);
+BENCHMARK(woodbury_apply)->Unit(benchmark::kMicrosecond);
+BENCHMARK(cg_iteration)->Unit(benchmark::kMillisecond);
+BENCHMARK_MAIN();
