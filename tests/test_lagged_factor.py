@@ -88,3 +88,14 @@ def test_error_estimate_on_the_lagged_factor_matches_a_fresh_factorisation(kind)
     fresh_estimate, _, note = fresh._estimate_error(fresh.load_case(nudged, normalized), second.positions)
     assert note == "" and second.error_estimate is not None
     assert second.error_estimate == pytest.approx(fresh_estimate, rel=1e-2)
+
+
+def test_factorizations_are_counted_for_emu_schur_rebuilds_only():
+    make, act, normalized = SMALL_KINDS["fusiform (pinned, tendons)"]
+    scene = make()
+    woodbury = emu.Solver(scene, "emu", alpha=100, error_estimate=False).solve(act, normalized=normalized)
+    schur = emu.Solver(scene, "emu", alpha=100, error_estimate=False, preconditioner="schur",
+                       preconditioner_refresh=2).solve(act, normalized=normalized)
+    assert woodbury.factorizations == 0
+    # rebuilt at the first step and at least every second one after
+    assert schur.factorizations >= (schur.iterations + 1) // 2

@@ -430,6 +430,7 @@ class EmuSolver::Newton {
       }
       ScopedSeconds timer(time.preconditioner);
       if (s_.schur_) {
+        ++dir.factorizations;
         if (!s_.schur_->update(A_)) return dir.fail("Schur-complement preconditioner could not be factorised");
       } else {
         s_.woodbury_->update(A_);
