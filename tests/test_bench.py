@@ -91,3 +91,11 @@ def test_fem_baselines_small():
     assert apart < 1e-6                      # the lagged factor reaches the same answer
     for label in ("EMU (demo settings)", "FEM lagged factor", "FEM accuracy 0.01"):
         assert f"| {label} |" in out
+
+
+def test_variants_small():
+    out = run(BENCH / "variants.py", "--scenes", "fusiform_r3", "--alphas", "300", "--variant", "modes=12",
+              "--variant", "preconditioner='schur',preconditioner_refresh=1000")
+    rows = [line for line in out.splitlines() if line.startswith("| fusiform_r3 |")]
+    assert len(rows) == 2 and "modes=12" in rows[0] and "preconditioner=schur" in rows[1]
+    assert int(rows[0].split("|")[-2]) == 0 and int(rows[1].split("|")[-2]) >= 1   # Schur factorises
