@@ -98,6 +98,24 @@ void block_products(benchmark::State& state) {
   state.SetBytesProcessed(state.iterations() * n * (81 + 9 + 9) * 8);
 }
 
+// The exact SNH Hessian's action from F (matrix-free: 9 doubles of F and the
+// direction per element instead of an 81-double block; snh::hessian_action)
+// against the stored-block product, over the same 20k (state.range(0)) or 2k
+// elements.
+void hessian_action(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  const auto Fs = random_gradients(n, 0.1, 4);
+  const auto Ds = random_gradients(n, 1.0, 5);
+  std::vector<Mat3> out(n);
+  for (auto _ : state) {
+    for (int u = 0; u < n; ++u) out[u] = snh::hessian_action(Fs[u], kMu, kLambda, Ds[u]);
+    benchmark::DoNotOptimize(out.data());
+    benchmark::ClobberMemory();
+  }
+  state.SetItemsProcessed(state.iterations() * n);
+  state.SetBytesProcessed(state.iterations() * n * (9 + 9 + 9) * 8);
+}
+
 // STREAM triad a = b + s c over arrays far larger than the caches: the
 // machine's sustainable bandwidth, the bound for streaming kernels.
 void stream_triad(benchmark::State& state) {
@@ -116,5 +134,6 @@ BENCHMARK(element_energy_gradient_hessian);
 BENCHMARK_CAPTURE(projection, numerical, false)->Arg(1)->Arg(30);
 BENCHMARK_CAPTURE(projection, closed_form, true)->Arg(1)->Arg(30);
 BENCHMARK(block_products)->ArgsProduct({{0, 1}, {20000, 2000}});
+BENCHMARK(hessian_action)->Arg(20000)->Arg(2000);
 BENCHMARK(stream_triad)->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();

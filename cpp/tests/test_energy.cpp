@@ -70,6 +70,17 @@ TEST(snh_hessian_matches_finite_differences) {
   }
 }
 
+TEST(snh_hessian_action_matches_the_hessian) {
+  // Near rest, spread out and inverted F, random directions D.
+  for (double spread : {0.05, 0.3, 1.5})
+    for (int trial = 0; trial < 20; ++trial) {
+      const Mat3 F = random_F(spread), D = random_F(1.0) - Mat3::Identity();
+      const Vec9 ref = snh::hessian(F, 1.3e4, 9.0e5) * flatten(D);
+      const Vec9 got = flatten(snh::hessian_action(F, 1.3e4, 9.0e5, D));
+      CHECK((got - ref).norm() <= 1e-12 * (ref.norm() + 1e4));
+    }
+}
+
 TEST(snh_zero_energy_and_stress_at_rest_and_under_rotation) {
   CHECK_CLOSE(snh::energy(Mat3::Identity(), mu, lam), 0.0, 1e-9 * lam);
   CHECK(snh::stress(Mat3::Identity(), mu, lam).norm() <= 1e-10 * lam);

@@ -79,4 +79,20 @@ inline Mat9 hessian(const Mat3& F, double mu, double lambda) {
   return H;
 }
 
+/// The Hessian's action H vec(D) without forming H (the same terms as
+/// hessian(); d2J/dF2 applied as cross products of F's columns):
+///   c_id D + c_ff (F:D) F + lambda (cof F:D) cof F + s [f1 x d2 - f2 x d1, f2 x d0 - f0 x d2, f0 x d1 - f1 x d0]
+/// with c_id = mu (1 - 1/(I_C+1)), c_ff = 2 mu/(I_C+1)^2, s = lambda (J - beta).
+inline Mat3 hessian_action(const Mat3& F, double mu, double lambda, const Mat3& D) {
+  const double ic = 3.0 + ic_minus_3(F), j = det_minus_1(F);
+  const Mat3 G = cofactor(F);
+  const double c_id = mu * (1.0 - 1.0 / (ic + 1.0)), c_ff = 2.0 * mu / ((ic + 1.0) * (ic + 1.0));
+  const double s = lambda * j - 0.75 * mu;
+  Mat3 out = c_id * D + (c_ff * F.cwiseProduct(D).sum()) * F + (lambda * G.cwiseProduct(D).sum()) * G;
+  out.col(0) += s * (F.col(1).cross(D.col(2)) - F.col(2).cross(D.col(1)));
+  out.col(1) += s * (F.col(2).cross(D.col(0)) - F.col(0).cross(D.col(2)));
+  out.col(2) += s * (F.col(0).cross(D.col(1)) - F.col(1).cross(D.col(0)));
+  return out;
+}
+
 }  // namespace emu::snh
