@@ -99,3 +99,12 @@ def test_variants_small():
     rows = [line for line in out.splitlines() if line.startswith("| fusiform_r3 |")]
     assert len(rows) == 2 and "modes=12" in rows[0] and "preconditioner=schur" in rows[1]
     assert int(rows[0].split("|")[-2]) == 0 and int(rows[1].split("|")[-2]) >= 1   # Schur factorises
+
+
+def test_fem_correction_small():
+    out = run(BENCH / "fem_correction.py", "--scenes", "fusiform_r3")
+    row = next(line for line in out.splitlines() if line.startswith("| fusiform_r3 |"))
+    cells = [c.strip() for c in row.split("|")[1:-1]]
+    emu_error = float(cells[2])
+    x1_error = float(cells[4].split()[0])
+    assert x1_error < emu_error             # FEM's correction moves EMU's answer towards FEM's
