@@ -117,12 +117,16 @@ void hessian_action(benchmark::State& state) {
 }
 
 // STREAM triad a = b + s c over arrays far larger than the caches: the
-// machine's sustainable bandwidth, the bound for streaming kernels.
+// machine's sustainable bandwidth, the bound for streaming kernels; with
+// state.range(0) = 1 over OMP_NUM_THREADS threads (the bound for the
+// parallel passes of CG).
 void stream_triad(benchmark::State& state) {
-  const size_t n = size_t(1) << 23;  // 3 x 64 MB
+  const long n = 1L << 23;  // 3 x 64 MB
   std::vector<double> a(n, 0.0), b(n, 1.0), c(n, 2.0);
+  const bool parallel = state.range(0) == 1;
   for (auto _ : state) {
-    for (size_t i = 0; i < n; ++i) a[i] = b[i] + 3.0 * c[i];
+#pragma omp parallel for schedule(static) if (parallel)
+    for (long i = 0; i < n; ++i) a[i] = b[i] + 3.0 * c[i];
     benchmark::DoNotOptimize(a.data());
     benchmark::ClobberMemory();
   }
@@ -135,5 +139,5 @@ BENCHMARK_CAPTURE(projection, numerical, false)->Arg(1)->Arg(30);
 BENCHMARK_CAPTURE(projection, closed_form, true)->Arg(1)->Arg(30);
 BENCHMARK(block_products)->ArgsProduct({{0, 1}, {20000, 2000}});
 BENCHMARK(hessian_action)->Arg(20000)->Arg(2000);
-BENCHMARK(stream_triad)->Unit(benchmark::kMillisecond);
+BENCHMARK(stream_triad)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();
