@@ -116,7 +116,10 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("lagged_cg_iterations", &SolverOptions::lagged_cg_iterations)
       .def_readwrite("lagged_cg_forcing", &SolverOptions::lagged_cg_forcing);
 
-  py::enum_<EmuStep>(m, "EmuStep").value("woodbury", EmuStep::Woodbury).value("newton_krylov", EmuStep::NewtonKrylov);
+  py::enum_<EmuStep>(m, "EmuStep")
+      .value("woodbury", EmuStep::Woodbury)
+      .value("newton_krylov", EmuStep::NewtonKrylov)
+      .value("lbfgs", EmuStep::Lbfgs);
 
   py::enum_<EmuPreconditioner>(m, "EmuPreconditioner")
       .value("woodbury", EmuPreconditioner::Woodbury)
@@ -133,7 +136,8 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh)
       .def_readwrite("preconditioner", &EmuOptions::preconditioner)
       .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space)
-      .def_readwrite("recycled_directions", &EmuOptions::recycled_directions);
+      .def_readwrite("recycled_directions", &EmuOptions::recycled_directions)
+      .def_readwrite("lbfgs_memory", &EmuOptions::lbfgs_memory);
 
   py::class_<PhaseTimes>(m, "PhaseTimes")
       .def_readonly("hessian", &PhaseTimes::hessian)

@@ -5,6 +5,7 @@
 
 #include "check.h"
 #include "emu/solvers/newton/newton_driver.h"
+#include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
 
 using namespace emu;
@@ -187,6 +188,37 @@ TEST(newton_driver_stalls_when_no_step_helps) {
   CHECK(!r.converged);
   CHECK(r.status.rfind("stalled", 0) == 0);
   CHECK(r.iterations == 0);
+}
+
+TEST(lbfgs_meets_the_secant_equation_and_skips_pairs_without_curvature) {
+  std::mt19937 rng(11);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  const int n = 12;
+  Eigen::MatrixXd M(n, n);
+  for (int i = 0; i < n * n; ++i) M.data()[i] = nd(rng);
+  const Eigen::MatrixXd A = M * M.transpose() + Eigen::MatrixXd::Identity(n, n);
+  const Eigen::VectorXd h0 = Eigen::VectorXd::LinSpaced(n, 0.5, 2.0);  // H0 = diag(h0)
+  auto initial = [&](const Eigen::VectorXd& in, Eigen::VectorXd& out) { out = h0.cwiseProduct(in); };
+  LbfgsMemory<Eigen::VectorXd> mem(4);
+  Eigen::VectorXd s, out;
+  for (int k = 0; k < 6; ++k) {
+    s = Eigen::VectorXd::NullaryExpr(n, [&] { return nd(rng); });
+    mem.push(s, A * s);
+  }
+  CHECK(mem.size() == 4);  // the oldest dropped
+  mem.apply(A * s, initial, out);
+  CHECK((out - s).norm() <= 1e-10 * s.norm());  // H_k y_k = s_k for the newest pair
+  for (int k = 0; k < 5; ++k) {  // positive definite
+    const Eigen::VectorXd g = Eigen::VectorXd::NullaryExpr(n, [&] { return nd(rng); });
+    mem.apply(g, initial, out);
+    CHECK(g.dot(out) > 0);
+  }
+  mem.push(s, -(A * s));  // negative curvature: not kept
+  CHECK(mem.size() == 4);
+  mem.clear();
+  const Eigen::VectorXd g = Eigen::VectorXd::Ones(n);
+  mem.apply(g, initial, out);
+  CHECK((out - h0).norm() <= 1e-15);  // no pairs: H0 g
 }
 
 TEST(pcg_solves_spd_systems_and_stops_at_negative_curvature) {

@@ -23,7 +23,7 @@ class NeutralModeWarning(UserWarning):
     equilibrium is not unique (see Solution.neutral_modes)."""
 
 METHODS = ("emu", "fem")
-STEPS = ("newton-krylov", "woodbury")
+STEPS = ("newton-krylov", "woodbury", "lbfgs")
 # accuracy= (EMU): accept a solve whose error estimate is within ACCEPT x the
 # target (the estimate was measured at 0.65-1.35 x the true error), aim new
 # alphas at AIM x the target; stop iterating when a full step moves no vertex
@@ -36,6 +36,9 @@ ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS, ACCURACY_CG_FORCING = 0.6, 0.4, 
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
 # ... and the step test applies once |g| <= STEP_GRAD |g_0| (measured: docs/DESIGN.md)
 STEP_GRAD = 1e-2
+# L-BFGS keeps its initial inverse (the Woodbury preconditioner) this many
+# steps: its curvature pairs make up for the lag (measured: docs/DESIGN.md)
+LBFGS_REFRESH = 20
 # The error estimate's FEM corrections: PCG on the last factorisation for at
 # most this many iterations before factorising (SolverOptions::lagged_cg_iterations)
 ESTIMATE_LAGGED_CG = 25
@@ -131,14 +134,17 @@ class Solver:
                   tolerance. Neither given: accuracy = 0.01 (the default for
                   the Newton-Krylov step), alpha chosen for it starting at 100
     modes         k, number of ACAP modes in the Woodbury term (multiple of 3)
-    step          "newton-krylov" (default) or "woodbury" (the paper's step)
+    step          "newton-krylov" (default), "woodbury" (the paper's step) or "lbfgs"
+                  (L-BFGS with the Woodbury step as its initial inverse Hessian,
+                  ``lbfgs_memory`` pairs; measured against Newton-Krylov in docs/DESIGN.md)
     rtol_grad     stop when |g| <= rtol_grad |g_0| ...
     rtol_energy   ... and the last energy decrease <= rtol_energy x total decrease
     max_iterations  per solve
     preconditioner  Newton-Krylov's preconditioner: "woodbury" (the paper's approximation through
                   k modes, no factorisation after setup) or "schur" (exact inverse of the filtered
                   Hessian through the position-space Schur complement: one factorisation per rebuild)
-    preconditioner_refresh  Newton-Krylov: rebuild the preconditioner every n steps (sooner if CG slows)
+    preconditioner_refresh  rebuild the preconditioner every n steps (Newton-Krylov: sooner if CG
+                  slows); None: 3 for Newton-Krylov, 20 for L-BFGS (measured: docs/DESIGN.md)
     exact_when_definite  use the unfiltered Hessian when it is definite (see README)
     bone_coarse_space  EMU with movable bones: add a coarse correction for the bones'
                   rotations to the preconditioner (fewer CG iterations; docs/DESIGN.md)
@@ -173,10 +179,10 @@ class Solver:
     def __init__(self, scene: Scene, method: str = "emu", *, alpha: float | None = None, modes: int = 24,
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
                  max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "woodbury",
-                 preconditioner_refresh: int = 3, bone_coarse_space: bool = True,
+                 preconditioner_refresh: int | None = None, bone_coarse_space: bool = True,
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 0,
-                 lagged_factor: bool = False, lagged_cg_iterations: int = 25):
+                 lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
@@ -206,7 +212,7 @@ class Solver:
         opts.rtol_grad, opts.rtol_energy = float(rtol_grad), float(rtol_energy)
         opts.exact_when_definite = bool(exact_when_definite)
         if max_iterations is None:
-            max_iterations = 200 if method == "fem" else (500 if step == "newton-krylov" else 20000)
+            max_iterations = 200 if method == "fem" else {"newton-krylov": 500, "lbfgs": 5000}.get(step, 20000)
         opts.max_iterations = int(max_iterations)
         if self.accuracy is not None:
             opts.step_tol = STEP_FRACTION * self.accuracy * bbox_diagonal(scene.points)
@@ -227,8 +233,10 @@ class Solver:
             eo = _core.EmuOptions()
             eo.alpha = float(alpha) * self.mu_ref
             eo.modes = int(modes)
-            eo.step = _core.EmuStep.newton_krylov if step == "newton-krylov" else _core.EmuStep.woodbury
+            eo.step = getattr(_core.EmuStep, step.replace("-", "_"))
             eo.cg_max_iterations = int(cg_max_iterations)
+            if preconditioner_refresh is None:
+                preconditioner_refresh = LBFGS_REFRESH if step == "lbfgs" else 3
             if int(preconditioner_refresh) < 1:
                 raise ValueError(f"preconditioner_refresh must be >= 1, got {preconditioner_refresh}")
             eo.preconditioner_refresh = int(preconditioner_refresh)
@@ -239,6 +247,9 @@ class Solver:
             if int(recycled_directions) < 0:
                 raise ValueError(f"recycled_directions must be >= 0, got {recycled_directions}")
             eo.recycled_directions = int(recycled_directions)
+            if int(lbfgs_memory) < 1:
+                raise ValueError(f"lbfgs_memory must be >= 1, got {lbfgs_memory}")
+            eo.lbfgs_memory = int(lbfgs_memory)
             self._core = _core.EmuSolver(self.model, opts, eo)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
                                  preconditioner=preconditioner if step == "newton-krylov" else None)

@@ -10,6 +10,7 @@
 #include "emu/linalg/rotation.h"
 #include "emu/solvers/bone_coarse_space.h"
 #include "emu/solvers/newton/newton_driver.h"
+#include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
 
 namespace emu {
@@ -31,6 +32,7 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
     : model_((model.validate(), model)), layout_(model_), options_(options), emu_(emu_options) {
   if (!(emu_.alpha > 0) || !std::isfinite(emu_.alpha)) throw std::invalid_argument("alpha must be positive and finite");
   if (emu_.modes < 0) throw std::invalid_argument("the number of modes must be >= 0");
+  if (emu_.lbfgs_memory < 1) throw std::invalid_argument("lbfgs_memory must be >= 1");
   if (layout_.num_bones && emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur)
     throw std::invalid_argument("the Schur-complement preconditioner does not handle movable bones; "
                                 "use preconditioner='woodbury'");
@@ -420,8 +422,10 @@ class EmuSolver::Newton {
     // The Woodbury (or Schur) preconditioner lags behind exact Hessian
     // products: it is rebuilt (eigen-filtered blocks, SYRK) every
     // preconditioner_refresh steps, or sooner when CG slows down by half since
-    // the last rebuild.
-    const bool refresh = !exact || it == 1 || since_refresh_ >= o.preconditioner_refresh ||
+    // the last rebuild. The paper's Woodbury step rebuilds it every step;
+    // L-BFGS's curvature pairs make up for the lag between rebuilds.
+    const bool lbfgs = o.step == EmuStep::Lbfgs;
+    const bool refresh = (!exact && !lbfgs) || it == 1 || since_refresh_ >= o.preconditioner_refresh ||
                          (cg_after_refresh_ >= 0 && last_cg_ > 1.5 * cg_after_refresh_ + 5);
     if (refresh) {
       {
@@ -437,7 +441,7 @@ class EmuSolver::Newton {
       }
       since_refresh_ = 0;
       cg_after_refresh_ = -1;
-    } else {
+    } else if (!lbfgs) {
       ScopedSeconds timer(time.hessian);
       s_.blocks_into(c_, F_, nullptr, &A_exact_);
     }
@@ -446,9 +450,10 @@ class EmuSolver::Newton {
       if (bones_) s_.riemannian_product(H, F_, g_, v, exact, out);
       else s_.hessian_product_into(H, v, out);
     };
-    // The bone coarse space follows the Hessian CG uses (rebuilt every step).
+    // The bone coarse space follows the Hessian CG uses (rebuilt every step;
+    // for L-BFGS, whose H0 it is part of, with the Woodbury term).
     for (Mat9X& r : recycled_) s_.project_tangent(F_, r);  // tangent at the current bones
-    if (bones_ && o.bone_coarse_space) {
+    if (bones_ && o.bone_coarse_space && (!lbfgs || refresh)) {
       ScopedSeconds timer(time.preconditioner);
       coarse_.build(
           F_,
@@ -462,6 +467,9 @@ class EmuSolver::Newton {
     ScopedSeconds timer(time.linear_solve);  // CG and the direction's fit
     if (o.step == EmuStep::Woodbury) {
       precondition(gR_, d_);
+      d_ = -d_;
+    } else if (lbfgs) {
+      lbfgs_.apply(gR_, [&](const Mat9X& r, Mat9X& z) { precondition(r, z); }, d_);
       d_ = -d_;
     } else {
       // Inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker).
@@ -529,7 +537,15 @@ class EmuSolver::Newton {
       Fx_ += s * Fd_;
       E_ = E_trial;
     }
-    update_gradient();
+    if (s_.emu_.step == EmuStep::Lbfgs) {
+      // The pair of this step: s d (tangent at the old bones) and the change of
+      // the tangent gradient (no vector transport: the bones turn little per step).
+      Mat9X g_old = gR_;
+      update_gradient();
+      lbfgs_.push(s * d_, gR_ - g_old);
+    } else {
+      update_gradient();
+    }
     last_cg_ = dir_cg_;
     if (cg_after_refresh_ < 0) cg_after_refresh_ = dir_cg_;
     // CG on an indefinite exact Hessian need not meet negative curvature: its
@@ -588,6 +604,7 @@ class EmuSolver::Newton {
   BoneCoarseSpace coarse_;
   std::vector<Mat9X> recycled_;
   Pcg<Mat9X> pcg_;
+  LbfgsMemory<Mat9X> lbfgs_{s_.emu_.lbfgs_memory};
 };
 
 SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {

@@ -44,7 +44,9 @@ struct SolverOptions {
   std::function<bool(const IterationRecord&, const Eigen::MatrixX3d&)> on_iteration;
 };
 
-enum class EmuStep { Woodbury, NewtonKrylov };
+// EMU's step: the paper's Woodbury quasi-Newton step, Newton-Krylov (PCG on
+// the exact Hessian), or L-BFGS with the Woodbury step as its initial inverse.
+enum class EmuStep { Woodbury, NewtonKrylov, Lbfgs };
 // Newton-Krylov preconditioner: the paper's Woodbury approximation (no
 // factorisation after setup), or the exact inverse through the position-space
 // Schur complement (a factorisation per lagged rebuild).
@@ -63,6 +65,7 @@ struct EmuOptions {
   // Movable bones: directions of CG solves far longer than the last one kept
   // in the coarse space of later steps, at most this many (0: off)
   int recycled_directions = 0;
+  int lbfgs_memory = 8;  // EmuStep::Lbfgs: the (s, y) pairs kept
 };
 
 }  // namespace emu

@@ -228,7 +228,7 @@ def main(argv=None):
     s.add_argument("--free-bones", nargs="*", metavar="BONE", help="bones the muscles move")
     s.add_argument("--activation", nargs="*", help="NAME=VALUE absolute activations")
     s.add_argument("--method", choices=["emu", "fem"], default="emu")
-    s.add_argument("--step", choices=["newton-krylov", "woodbury"], default="newton-krylov")
+    s.add_argument("--step", choices=["newton-krylov", "woodbury", "lbfgs"], default="newton-krylov")
     s.add_argument("--alpha", type=float, default=None,
                    help="EMU alpha relative to the softest muscle's shear modulus, fixed (default: chosen for "
                         "--accuracy, 0.01 unless --alpha is given)")

@@ -34,7 +34,7 @@
     accuracy = 0.01              # the vertex error to FEM wanted (1% of the diagonal): picks alpha
                                  # and stops iterating when steps no longer matter (emu.Solver)
     modes = 24
-    step = "newton-krylov"       # or "woodbury"
+    step = "newton-krylov"       # or "woodbury", "lbfgs"
     rtol_grad = 1e-6
     rtol_energy = 1e-10
     max_iterations = 500
