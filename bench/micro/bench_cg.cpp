@@ -1,5 +1,5 @@
 // Microbenchmarks of one EMU CG iteration and its kernels (Google Benchmark)
-// on a pinned bar of about 17k tets (the size of bench_scenes' fusiform_20k),
+// on pinned bars of about 17k and 4k tets (fusiform_20k's size, the demo's),
 // alpha = 100 mu, near-rest F with noise, 1 thread unless OMP_NUM_THREADS:
 //   build/micro/bench_cg [--benchmark_filter=woodbury]
 // bytes_per_second counts the traffic each kernel streams as written (every
@@ -64,9 +64,12 @@ struct EmuSolverProbe {
 using namespace emu;
 
 namespace {
-EmuSolverProbe& probe() {
-  static EmuSolverProbe p(bar(8, 45));  // 8 x 8 x 45 hexes: 17,280 tets
-  return p;
+// state.range(0): 0 = 8 x 8 x 45 hexes, 17,280 tets (fusiform_20k's size);
+// 1 = 5 x 5 x 28, 4,200 tets (the demo arm's soft tets): where the fixed
+// cost of a parallel pass shows.
+EmuSolverProbe& probe(int size) {
+  static EmuSolverProbe large(bar(8, 45)), small(bar(5, 28));
+  return size == 0 ? large : small;
 }
 
 constexpr double kB = 8.0;  // bytes per double
@@ -82,14 +85,14 @@ constexpr double kWoodbury = 99 + 33 + 27 + 108;
 constexpr double kVectors = 6 + 4;
 
 void report(benchmark::State& state, double per_tet) {
-  const double n = static_cast<double>(probe().unknowns());
+  const double n = static_cast<double>(probe(static_cast<int>(state.range(0))).unknowns());
   state.SetItemsProcessed(state.iterations() * static_cast<long>(n));
   state.SetBytesProcessed(static_cast<long>(state.iterations() * n * per_tet * kB));
   state.counters["tets"] = n;
 }
 
 void fit(benchmark::State& state) {
-  EmuSolverProbe& p = probe();
+  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
   for (auto _ : state) {
     p.fit(p.v);
     benchmark::DoNotOptimize(p.Fd.data());
@@ -98,7 +101,7 @@ void fit(benchmark::State& state) {
 }
 
 void back_substitution(benchmark::State& state) {
-  EmuSolverProbe& p = probe();
+  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
   // The ACAP fit's solve: K_c^-1 R with 3 right-hand sides (L (x) I3).
   const Eigen::MatrixXd rhs = Eigen::MatrixXd::Random(p.position_dofs(), 3);
   Eigen::MatrixXd Z;
@@ -112,7 +115,7 @@ void back_substitution(benchmark::State& state) {
 }
 
 void hessian_product(benchmark::State& state) {
-  EmuSolverProbe& p = probe();
+  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
   Mat9X out;
   for (auto _ : state) {
     p.product(p.v, out);
@@ -122,7 +125,7 @@ void hessian_product(benchmark::State& state) {
 }
 
 void woodbury_apply(benchmark::State& state) {
-  EmuSolverProbe& p = probe();
+  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
   Mat9X out;
   for (auto _ : state) {
     p.precondition(p.v, out);
@@ -134,7 +137,7 @@ void woodbury_apply(benchmark::State& state) {
 
 // Whole PCG iterations (tolerance 0: none stops early), items = iterations x tets.
 void cg_iteration(benchmark::State& state) {
-  EmuSolverProbe& p = probe();
+  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
   Pcg<Mat9X> pcg;
   Mat9X d;
   const int iterations = 20;
@@ -155,9 +158,9 @@ void cg_iteration(benchmark::State& state) {
 }
 }  // namespace
 
-BENCHMARK(fit)->Unit(benchmark::kMicrosecond);
-BENCHMARK(back_substitution)->Unit(benchmark::kMicrosecond);
-BENCHMARK(hessian_product)->Unit(benchmark::kMicrosecond);
-BENCHMARK(woodbury_apply)->Unit(benchmark::kMicrosecond);
-BENCHMARK(cg_iteration)->Unit(benchmark::kMillisecond);
+BENCHMARK(fit)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+BENCHMARK(back_substitution)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+BENCHMARK(hessian_product)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+BENCHMARK(woodbury_apply)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+BENCHMARK(cg_iteration)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();
