@@ -343,7 +343,7 @@ def test_other_bad_input():
     with pytest.raises(ValueError, match="alpha must be a positive number"):
         emu.Solver(s, "emu", alpha=-1.0)
     with pytest.raises(ValueError, match="step must be one of"):
-        emu.Solver(s, "emu", step="lbfgs")
+        emu.Solver(s, "emu", step="gauss-newton")
     with pytest.raises(ValueError, match="pin: vertex ids"):
         s.pin([len(s.points)])
     with pytest.raises(ValueError, match="repeat a vertex"):
