@@ -30,7 +30,8 @@ def main(argv=None):
     print("|---|---|---|---|---|---|")
     for name in a.scenes:
         scene, act, normalized = SCENES[name]()
-        off = emu.Solver(scene, "emu", alpha=a.alpha, error_estimate=False).solve(act, normalized=normalized)
+        off = emu.Solver(scene, "emu", alpha=a.alpha, error_estimate=False,
+                         recycled_directions=0).solve(act, normalized=normalized)
         on = emu.Solver(scene, "emu", alpha=a.alpha, error_estimate=False,
                         recycled_directions=a.keep).solve(act, normalized=normalized)
         print(f"| {name} | {off.iterations} / {off.cg_iterations} | {off.time_s:.2f} | {on.iterations} / "

@@ -150,8 +150,9 @@ class Solver:
                   rotations to the preconditioner (fewer CG iterations; docs/DESIGN.md)
     recycled_directions  EMU with movable bones: keep the directions of up to this many
                   CG solves that took far longer than the step before in that coarse
-                  correction (0: off; 4 cut realistic_biceps at the strict tolerance
-                  from 5,547 to 1,438 CG iterations, docs/DESIGN.md)
+                  correction (default 4; 0: off. At the strict tolerance 4 cut
+                  realistic_biceps from 6,754 to 3,056 CG iterations and the
+                  bone scenes' total time by 40%, docs/DESIGN.md)
     threads       OpenMP and OpenBLAS threads (None: leave as is)
     error_estimate  EMU: estimate every solve's error to FEM (Solution.error_estimate;
                   one or two sparse factorisations of the FEM Hessian per
@@ -181,7 +182,7 @@ class Solver:
                  max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "woodbury",
                  preconditioner_refresh: int | None = None, bone_coarse_space: bool = True,
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
-                 error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 0,
+                 error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
                  lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")

@@ -64,7 +64,7 @@ struct EmuOptions {
   bool bone_coarse_space = true;   // movable bones: add the bone-rotation coarse correction (see emu_solver.cpp)
   // Movable bones: directions of CG solves far longer than the last one kept
   // in the coarse space of later steps, at most this many (0: off)
-  int recycled_directions = 0;
+  int recycled_directions = 4;
   int lbfgs_memory = 8;  // EmuStep::Lbfgs: the (s, y) pairs kept
 };
 
