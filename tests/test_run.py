@@ -66,6 +66,7 @@ def test_run_scene_writes_frames_series_surfaces_and_log(tmp_path):
     on_disk = json.loads((out / "log.json").read_text())
     assert on_disk["frames"] == json.loads(json.dumps(log["frames"], default=float))
     assert len(log["frames"]) == 3 and all(f["converged"] for f in log["frames"])
+    assert all(f["inverted_tets"] == 0 for f in log["frames"])   # logged per frame
     assert log["frames"][1]["activation"]["belly"] == pytest.approx(0.2 * 1e5)
     assert not log["interrupted"]
 

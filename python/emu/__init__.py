@@ -11,7 +11,7 @@ nothing inside the package (every internal import is relative and goes to a
 lower layer; tests/test_imports.py enforces it).
 """
 from . import _core
-from .geometry import bbox_diagonal, error_history, time_to_error, vertex_error
+from .geometry import bbox_diagonal, error_history, inverted_tets, time_to_error, vertex_error
 from .joints import Joint
 from .parts import Part, lame
 from .poses import pose_about, rotation
@@ -22,5 +22,5 @@ from .bones import bone_motion, rigid_fit, signed_angle
 from . import activation, bones, datasets, fibers, geometry, io, joints, lowering, meshes, poses, run, scenefile, scenes
 
 __all__ = ["Scene", "Part", "Joint", "MeshWarning", "lame", "Solver", "Solution", "solve", "rotation", "pose_about",
-           "io", "meshes", "scenes", "datasets", "fibers", "info", "vertex_error", "error_history", "time_to_error", "bbox_diagonal", "bone_motion", "rigid_fit",
+           "io", "meshes", "scenes", "datasets", "fibers", "info", "vertex_error", "error_history", "time_to_error", "bbox_diagonal", "inverted_tets", "bone_motion", "rigid_fit",
            "signed_angle", "NeutralModeWarning", "__version__"]

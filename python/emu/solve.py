@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .geometry import bbox_diagonal, vertex_error
+from .geometry import bbox_diagonal, inverted_tets, vertex_error
 from .lowering import build_model, declared_joint_rows, declared_joint_world
 from .poses import parse_pose
 from .runtime import set_threads
@@ -61,6 +61,8 @@ class Solution:
                 the FEM energy at EMU's positions (docs/DESIGN.md: how it was
                 validated); None for FEM, or where it is not available
                 (error_estimate_note says why)
+    inverted_tets  how many tets are inverted or collapsed at ``positions``
+                (emu.geometry.inverted_tets lists them)
     phase_times seconds per phase of the solve: hessian (element Hessian
                 blocks; FEM: and their assembly), preconditioner (EMU: its
                 rebuilds and the bone coarse space), linear_solve (FEM:
@@ -92,13 +94,14 @@ class Solution:
     error_estimate_time_s: float = 0.0
     error_estimate_note: str = ""
     phase_times: dict = field(default_factory=dict, repr=False)
+    inverted_tets: int = 0           # tets with non-positive volume at the returned positions
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
         state = "converged" if self.converged else f"NOT converged ({self.status})"
-        est = ""
+        est = f", {self.inverted_tets} inverted tet(s)" if self.inverted_tets else ""
         if self.error_estimate is not None:
-            est = f", estimated error to FEM {self.error_estimate:.1e} of the diagonal"
+            est += f", estimated error to FEM {self.error_estimate:.1e} of the diagonal"
         return (f"{self.label}: {state} in {self.iterations} iterations{cg}, "
                 f"{self.time_s:.3f} s (+{self.setup_time_s:.3f} s setup), |g|/|g0| = "
                 f"{self.grad_norm / self.grad_norm0 if self.grad_norm0 else 0:.2e}{est}")
@@ -470,7 +473,8 @@ class Solver:
                         exact_attempts_failed=r.exact_attempts_failed, factorizations=r.factorizations,
                         neutral_modes=self._neutral_modes(r), iterates=iterates, error_estimate=estimate,
                         error_estimate_time_s=estimate_s, error_estimate_note=note,
-                        phase_times=_phase_times(r))
+                        phase_times=_phase_times(r),
+                        inverted_tets=len(inverted_tets(self.scene.tets, positions)))
 
     def _estimate_error(self, load, positions) -> tuple:
         """(estimate, seconds, note): EMU's vertex error to FEM, estimated by the

@@ -56,13 +56,16 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                                   "rel_grad_norm": sol.grad_norm / sol.grad_norm0 if sol.grad_norm0 else 0.0,
                                   "solve_s": sol.time_s, "alpha": sol.settings.get("alpha"),
                                   "error_estimate": sol.error_estimate,
-                                  "error_estimate_s": sol.error_estimate_time_s})
+                                  "error_estimate_s": sol.error_estimate_time_s,
+                                  "inverted_tets": sol.inverted_tets})
             if on_frame is not None:
                 on_frame(k, sol)
             elapsed = time.perf_counter() - t_start
             left = elapsed / (k + 1) * (spec.frames - k - 1)
             flag = "" if sol.converged else f"  NOT converged: {sol.status}"
             est = "" if sol.error_estimate is None else f", est. error to FEM {sol.error_estimate:.1e}"
+            if sol.inverted_tets:
+                est += f", {sol.inverted_tets} inverted tet(s)"
             progress(f"frame {k + 1}/{spec.frames}: {sol.iterations} it"
                      + (f" ({sol.cg_iterations} CG)" if sol.cg_iterations else "")
                      + f", E = {sol.energy:.6g}, {sol.time_s:.2f} s{est}, ~{left:.0f} s left{flag}")
