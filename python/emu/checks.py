@@ -16,7 +16,7 @@ import numpy as np
 from .geometry import bbox_diagonal
 
 __all__ = ["MeshReport", "check_mesh", "tet_quality", "signed_volumes", "connected_components",
-           "check_anchored", "check_movable_bones"]
+           "check_anchored", "check_movable_bones", "integer_ids"]
 
 SLIVER_QUALITY = 0.05
 
@@ -59,6 +59,24 @@ class MeshReport:
         return out
 
 
+def integer_ids(values, what: str) -> np.ndarray:
+    """``values`` as int64 ids (any shape), or a ValueError naming ``what``:
+    floats must be whole numbers (1.0 is 1; 0.5, NaN or inf are refused, never
+    truncated), and anything else must be an integer array."""
+    a = np.asarray(values)
+    if a.dtype == bool or not (np.issubdtype(a.dtype, np.integer) or np.issubdtype(a.dtype, np.floating)):
+        if a.size == 0:
+            return a.astype(np.int64)
+        raise ValueError(f"{what} must be integer ids, got an array of {a.dtype}")
+    if np.issubdtype(a.dtype, np.floating) and a.size:
+        if not np.all(np.isfinite(a)) or not np.all(a == np.round(a)):
+            bad = a[~(np.isfinite(a) & (a == np.round(a)))].ravel()[0]
+            raise ValueError(f"{what} must be whole numbers, got {bad}")
+        if np.abs(a).max() >= 2**62:
+            raise ValueError(f"{what} are out of range (largest {np.abs(a).max():g})")
+    return a.astype(np.int64)
+
+
 def _as_arrays(points, tets):
     try:
         points = np.asarray(points, dtype=np.float64)
@@ -69,10 +87,7 @@ def _as_arrays(points, tets):
     t = np.asarray(tets)
     if t.ndim != 2 or t.shape[1] != 4:
         raise ValueError(f"tets must have shape (m, 4), got {t.shape}")
-    if t.size and not np.issubdtype(t.dtype, np.integer):
-        if not np.all(np.equal(np.mod(t, 1), 0)):
-            raise ValueError("tets must hold integer vertex indices")
-    return points, t.astype(np.int64)
+    return points, integer_ids(t, "tets (vertex indices)")
 
 
 def check_mesh(points, tets):

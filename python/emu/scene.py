@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 
-from .checks import check_anchored, check_mesh, check_movable_bones
+from .checks import check_anchored, check_mesh, check_movable_bones, integer_ids
 from .fibers import attachment_fibers, attachments, laplace_fibers
 from .joints import declare_joint, detect_joints
 from .parts import BONE_ACAP_WEIGHT, Part, default_tendon_weight, lame
@@ -52,7 +52,7 @@ class Scene:
                 raise ValueError(f"part '{name}': a boolean tet mask must have shape ({len(self.tets)},), "
                                  f"got {idx.shape}")
             idx = np.flatnonzero(idx)
-        idx = idx.astype(np.int64).ravel()
+        idx = integer_ids(idx, f"part '{name}': tet ids").ravel()
         if idx.size == 0:
             raise ValueError(f"part '{name}' has no tets")
         if idx.min() < 0 or idx.max() >= len(self.tets):
@@ -221,7 +221,7 @@ class Scene:
     # ------------------------------------------------------ boundary conditions
     def pin(self, vertex_ids, positions=None):
         """Fix vertices at their rest positions (or at ``positions``, (k, 3))."""
-        ids = np.asarray(vertex_ids).astype(np.int64).ravel()
+        ids = integer_ids(vertex_ids, "pin: vertex ids").ravel()
         if ids.size == 0:
             raise ValueError("pin: no vertex ids given")
         if ids.min() < 0 or ids.max() >= len(self.points):
