@@ -3,6 +3,7 @@
 #   bash run.sh demo [emu demo options]   install what is missing, then run the demo
 #   bash run.sh test                      install what is missing, then C++ tests (ctest) and pytest
 #   bash run.sh setup                     only install
+#   bash run.sh sanitize                  the C++ core and tests under ASan + UBSan (CMakePresets.json)
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -45,11 +46,20 @@ cpp_tests() {
   (cd build/ctest && ctest --output-on-failure)
 }
 
+sanitize() {
+  # the C++ core and tests under AddressSanitizer + UndefinedBehaviorSanitizer
+  # (CMakePresets.json "sanitize"; leaks detected, any report fails)
+  cmake --preset sanitize >/dev/null
+  cmake --build --preset sanitize -j "$(nproc)" >/dev/null
+  ctest --preset sanitize
+}
+
 cmd="${1:-demo}"
 shift || true
 case "$cmd" in
   setup) setup ;;
+  sanitize) setup; sanitize ;;
   demo) setup; emu demo "$@" ;;
   test) setup; cpp_tests; "$PY" -m pytest -q tests "$@" ;;
-  *) echo "usage: bash run.sh [setup|demo|test] [options]"; exit 2 ;;
+  *) echo "usage: bash run.sh [setup|demo|test|sanitize] [options]"; exit 2 ;;
 esac

@@ -19,6 +19,10 @@ Woodbury::Woodbury(const Model& model, const UnknownLayout& layout, const AcapOp
       Ainv_(layout.num_unknowns) {
   psi_vertex_ = Eigen::MatrixXd::Zero(model.rest.rows(), ks_);
   if (ks_) acap.expand(psi_, psi_vertex_);
+  // An Eigen::LLT leaves its status unset until computed: compute the empty one
+  // so that copying a Woodbury before its first update reads no uninitialised
+  // value (UndefinedBehaviorSanitizer).
+  X_llt_.compute(Eigen::MatrixXd());
 }
 
 void Woodbury::mode_gradients(Eigen::Index u, Eigen::Matrix<double, 3, Eigen::Dynamic>& g) const {
