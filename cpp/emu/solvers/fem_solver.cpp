@@ -212,7 +212,11 @@ class FemSolver::Newton {
         s_.assemble_hessian(x_, act_, false);
       }
       ScopedSeconds timer(time.linear_solve);
-      if (!filtered_direction()) return dir.fail("Newton matrix is not positive definite even after regularisation");
+      if (!filtered_direction())
+        return dir.fail(
+            "Newton matrix is not positive definite even after regularisation: likely a part that nothing "
+            "anchors (no pin, fixed bone or joint holds it), or collapsed tets (see scene.mesh_report and "
+            "Solution.inverted_tets)");
     }
     last_neutral_ = have ? std::vector<NeutralMode>() : neutral_;
     neutral_.clear();
