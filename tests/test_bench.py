@@ -108,3 +108,10 @@ def test_fem_correction_small():
     emu_error = float(cells[2])
     x1_error = float(cells[4].split()[0])
     assert x1_error < emu_error             # FEM's correction moves EMU's answer towards FEM's
+
+
+def test_stability_table_small():
+    out = run(BENCH / "stability.py", "--only", "modes", "scale")
+    rows = [line for line in out.splitlines() if line.startswith("| k = ") or line.startswith("| coordinates")]
+    assert len(rows) == 2 + 4                       # k: EMU only; scales: both methods
+    assert all("| converged |" in r for r in rows)
