@@ -3,7 +3,20 @@
 emu.datasets (EMU_DATA_DIR for a local copy)."""
 from __future__ import annotations
 
+import time
+import warnings
+
 import emu
+
+
+def start_run(threads: int) -> None:
+    """The common start of a benchmark run: warnings off (the tables are the
+    output), the thread count set, and a header line naming the version, BLAS,
+    threads and date of the run."""
+    warnings.simplefilter("ignore")
+    emu.runtime.set_threads(threads)
+    i = emu.info()
+    print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {threads}; {time.strftime('%Y-%m-%d')}\n")
 
 
 def _research(name, free_bones=()):

@@ -16,11 +16,9 @@ from __future__ import annotations
 
 import argparse
 import collections
-import time
-import warnings
 
 import emu
-from bench_scenes import SCENES
+from bench_scenes import SCENES, start_run
 from emu.app.demo import demo_spec
 
 PHASES = ("hessian", "preconditioner", "linear_solve", "line_search", "step", "other")
@@ -78,10 +76,7 @@ def main(argv=None):
     ap.add_argument("--frames", type=int, default=25)
     ap.add_argument("--resolution", type=int, default=3)
     a = ap.parse_args(argv)
-    warnings.simplefilter("ignore")
-    emu.runtime.set_threads(a.threads)
-    i = emu.info()
-    print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {a.threads}; {time.strftime('%Y-%m-%d')}\n")
+    start_run(a.threads)
     single_solves(a.scenes, a.caps)
     if a.frames > 0:
         sequence(a.frames, a.resolution)

@@ -13,10 +13,9 @@ from __future__ import annotations
 
 import argparse
 import time
-import warnings
 
 import emu
-from bench_scenes import SCENES
+from bench_scenes import SCENES, start_run
 
 
 def main(argv=None):
@@ -26,10 +25,7 @@ def main(argv=None):
     ap.add_argument("--alpha", type=float, default=100.0)
     ap.add_argument("--threads", type=int, default=1)
     a = ap.parse_args(argv)
-    warnings.simplefilter("ignore")
-    emu.runtime.set_threads(a.threads)
-    i = emu.info()
-    print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {a.threads}; {time.strftime('%Y-%m-%d')}\n")
+    start_run(a.threads)
     print("| scene | EMU s | EMU error | its estimate (s) | x1 error (s) | x2 error (s) |")
     print("|---|---|---|---|---|---|")
     for name in a.scenes:

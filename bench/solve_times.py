@@ -10,11 +10,9 @@ columns (Solution.phase_times, of the best repeat) say where the time went.
 from __future__ import annotations
 
 import argparse
-import time
-import warnings
 
 import emu
-from bench_scenes import SCENES
+from bench_scenes import SCENES, start_run
 
 
 def main(argv=None):
@@ -25,10 +23,7 @@ def main(argv=None):
     ap.add_argument("--emu-iterations", type=int, default=10)
     ap.add_argument("--alpha", type=float, default=100.0)
     a = ap.parse_args(argv)
-    warnings.simplefilter("ignore")
-    emu.runtime.set_threads(a.threads)
-    i = emu.info()
-    print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {a.threads}; {time.strftime('%Y-%m-%d')}\n")
+    start_run(a.threads)
     phases = ("hessian", "preconditioner", "linear_solve", "line_search", "step", "other")  # Solution.phase_times
     print("| scene | method | iterations / CG | best solve s | " + " | ".join(phases) + " |")
     print("|---|---|---|---|" + "---|" * len(phases))

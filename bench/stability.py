@@ -12,13 +12,12 @@ accuracy default unless the case sets alpha or k.
 from __future__ import annotations
 
 import argparse
-import math
 import time
 import warnings
 
-import numpy as np
 
 import emu
+from bench_scenes import start_run
 from emu.meshes import fusiform as fusiform_mesh
 
 MUSCLE_YOUNGS = 6e4
@@ -74,9 +73,7 @@ def main(argv=None):
     ap.add_argument("--only", nargs="*", default=list(CASES))
     ap.add_argument("--threads", type=int, default=1)
     a = ap.parse_args(argv)
-    emu.runtime.set_threads(a.threads)
-    i = emu.info()
-    print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {a.threads}; {time.strftime('%Y-%m-%d')}\n")
+    start_run(a.threads)
     print("| case | method | result | iterations (/ CG) | final |g| / |g0| | inverted tets | EMU's error estimate | s |")
     print("|---|---|---|---|---|---|---|---|")
     for group in a.only:

@@ -11,11 +11,9 @@ from __future__ import annotations
 
 import argparse
 import ast
-import time
-import warnings
 
 import emu
-from bench_scenes import SCENES
+from bench_scenes import SCENES, start_run
 
 
 def parse_variant(text: str) -> dict:
@@ -37,11 +35,8 @@ def main(argv=None):
     ap.add_argument("--variant", action="append", default=[], help="Solver options, e.g. modes=48,preconditioner_refresh=1")
     ap.add_argument("--threads", type=int, default=1)
     a = ap.parse_args(argv)
-    warnings.simplefilter("ignore")
-    emu.runtime.set_threads(a.threads)
     variants = [parse_variant(v) for v in a.variant] or [{}]
-    i = emu.info()
-    print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {a.threads}; {time.strftime('%Y-%m-%d')}\n")
+    start_run(a.threads)
     print("| scene | alpha (mu) | variant | setup s | to 1% s | to 0.5% s | converged s | Newton / CG | factorisations |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name in a.scenes:

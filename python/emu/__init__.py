@@ -11,7 +11,8 @@ nothing inside the package (every internal import is relative and goes to a
 lower layer; tests/test_imports.py enforces it).
 """
 from . import _core
-from .geometry import bbox_diagonal, error_history, inverted_tets, time_to_error, vertex_error
+from .checks import inverted_tets
+from .geometry import bbox_diagonal, error_history, time_to_error, vertex_error
 from .joints import Joint
 from .parts import Part, lame
 from .poses import pose_about, rotation

@@ -16,7 +16,7 @@ import numpy as np
 from .geometry import bbox_diagonal
 
 __all__ = ["MeshReport", "check_mesh", "tet_quality", "signed_volumes", "connected_components",
-           "check_anchored", "check_movable_bones", "integer_ids"]
+           "check_anchored", "check_movable_bones", "integer_ids", "inverted_tets"]
 
 SLIVER_QUALITY = 0.05
 
@@ -25,6 +25,13 @@ def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """points  (n, 3); tets  (m, 4) -> (m,) signed volumes."""
     p = points[tets]
     return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+
+
+def inverted_tets(tets, x) -> np.ndarray:
+    """Indices of the tets (m, 4) whose deformed volume at positions x (n, 3) is
+    not positive (det F <= 0 for positively oriented rest tets, which every
+    emu.Scene has): inverted or collapsed."""
+    return np.flatnonzero(signed_volumes(np.asarray(x, dtype=np.float64), np.asarray(tets)) <= 0.0)
 
 
 def tet_quality(points: np.ndarray, tets: np.ndarray) -> np.ndarray:

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["error_history", "time_to_error", "time_within", "bbox_diagonal", "vertex_error", "deformation_gradients",
-           "inverted_tets"]
+__all__ = ["error_history", "time_to_error", "time_within", "bbox_diagonal", "vertex_error", "deformation_gradients"]
 
 
 def bbox_diagonal(points) -> float:
@@ -57,15 +56,6 @@ def time_within(t, e, target: float) -> float:
     if len(above) == 0:
         return float(t[0])
     return float(t[above[-1] + 1]) if above[-1] + 1 < len(t) else float("inf")
-
-
-def inverted_tets(tets, x) -> np.ndarray:
-    """Indices of the tets (m, 4) whose deformed volume at positions x (n, 3) is
-    not positive (det F <= 0 for positively oriented rest tets, which every
-    emu.Scene has): inverted or collapsed."""
-    q = np.asarray(x, dtype=np.float64)[np.asarray(tets)]
-    e = np.stack([q[:, 1] - q[:, 0], q[:, 2] - q[:, 0], q[:, 3] - q[:, 0]], axis=2)
-    return np.flatnonzero(np.linalg.det(e) <= 0.0)
 
 
 def deformation_gradients(rest: np.ndarray, tets: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -9,7 +9,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .geometry import bbox_diagonal, inverted_tets, vertex_error
+from .checks import inverted_tets
+from .geometry import bbox_diagonal, vertex_error
 from .lowering import build_model, declared_joint_rows, declared_joint_world
 from .poses import parse_pose
 from .runtime import set_threads
@@ -62,7 +63,7 @@ class Solution:
                 validated); None for FEM, or where it is not available
                 (error_estimate_note says why)
     inverted_tets  how many tets are inverted or collapsed at ``positions``
-                (emu.geometry.inverted_tets lists them)
+                (emu.inverted_tets lists them)
     phase_times seconds per phase of the solve: hessian (element Hessian
                 blocks; FEM: and their assembly), preconditioner (EMU: its
                 rebuilds and the bone coarse space), linear_solve (FEM:

@@ -174,13 +174,19 @@ class FemSolver::Newton {
     // retried only once the iteration is in the Newton regime (last step full).
     const bool try_exact = s_.options_.exact_when_definite && (last_exact_ok_ || last_step_ == 1.0);
     const int factorizations0 = s_.factorizations_;
+    // The element Hessians assembled into values_ (exact or filtered), once per
+    // kind: the lagged PCG only reads them, so its fallback reuses them.
+    int assembled = -1;  // -1: none, 0: filtered, 1: exact
+    auto assemble = [&](bool exact) {
+      if (assembled == int(exact)) return;
+      ScopedSeconds timer(time.hessian);
+      s_.assemble_hessian(x_, act_, exact);
+      assembled = int(exact);
+    };
     if (s_.options_.lagged_cg_iterations > 0 && s_.lag_.valid) {
       // Newton-CG on the lagged factor, to the forcing term of EMU's CG
       // (Eisenstat-Walker); a factorisation only when that does not converge.
-      {
-        ScopedSeconds timer(time.hessian);
-        s_.assemble_hessian(x_, act_, try_exact);
-      }
+      assemble(try_exact);
       ScopedSeconds timer(time.linear_solve);
       const double eta = std::min(s_.options_.lagged_cg_forcing, std::sqrt(gn_ / g0_));
       if (lagged_direction(try_exact, eta * gn_, dir.cg_iterations) && slope() < 0) {
@@ -192,10 +198,7 @@ class FemSolver::Newton {
     }
     bool have = false;
     if (try_exact) {
-      {
-        ScopedSeconds timer(time.hessian);
-        s_.assemble_hessian(x_, act_, true);
-      }
+      assemble(true);
       ScopedSeconds timer(time.linear_solve);
       if (newton_direction(true) && slope() < 0) {
         last_exact_ok_ = true;
@@ -207,10 +210,7 @@ class FemSolver::Newton {
     }
     if (!have) {
       ++dir.filtered;
-      {
-        ScopedSeconds timer(time.hessian);
-        s_.assemble_hessian(x_, act_, false);
-      }
+      assemble(false);
       ScopedSeconds timer(time.linear_solve);
       if (!filtered_direction())
         return dir.fail(
