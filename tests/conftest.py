@@ -87,15 +87,7 @@ PIN_SETS = {"proximal": ("proximal",), "both": ("proximal", "distal"), None: ()}
 def bone_chain_scene():
     """A chain: fixed bone "a", movable "b" hinged to it, movable "c" hinged to
     "b" (a joint between two movable bones), muscles "m1", "m2", "m3"."""
-    pts, tets, lab = emu.meshes.block_mesh(
-        {"a": [(0, 0)], "b": [(1, 1)], "c": [(2, 2)], "m1": [(0, 1)], "m2": [(1, 2)], "m3": [(2, 1), (1, 0)]}, 1)
-    s = emu.Scene(pts, tets)
-    s.add_bone("a", lab == 0)
-    s.add_bone("b", lab == 1, fixed=False)
-    s.add_bone("c", lab == 2, fixed=False)
-    for i, name in enumerate(("m1", "m2", "m3")):
-        s.add_muscle(name, lab == 3 + i, [1, 1, 0])
-    return s
+    return emu.scenes.chain(1)
 
 
 # Small scenes of each kind (a pinned muscle with tendons, a forearm on a hinge,

@@ -113,5 +113,5 @@ def test_fem_correction_small():
 def test_stability_table_small():
     out = run(BENCH / "stability.py", "--only", "modes", "scale")
     rows = [line for line in out.splitlines() if line.startswith("| k = ") or line.startswith("| coordinates")]
-    assert len(rows) == 2 + 4                       # k: EMU only; scales: both methods
+    assert len(rows) == 3 + 4                       # k (0, 96, 300): EMU only; scales: both methods
     assert all("| converged |" in r for r in rows)

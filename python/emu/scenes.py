@@ -1,17 +1,17 @@
 """Built-in scenes, made procedurally (no files): the fusiform muscle of
-``emu compare``, the tests and the benchmarks, the arm of ``emu demo`` and a
-head on a ball joint."""
+``emu compare``, the tests and the benchmarks, the arm of ``emu demo``, a
+head on a ball joint and a chain of two movable bones."""
 from __future__ import annotations
 
 import numpy as np
 
-from .meshes import NECK_MUSCLES
+from .meshes import NECK_MUSCLES, block_mesh
 from .meshes import arm as arm_mesh
 from .meshes import fusiform as fusiform_mesh
 from .meshes import neck as neck_mesh
 from .scene import Scene
 
-__all__ = ["fusiform", "arm", "neck"]
+__all__ = ["fusiform", "arm", "neck", "chain"]
 
 
 def fusiform(resolution: int | None = None, *, tets: int | None = None, pins=("proximal",), length: float = 10.0,
@@ -75,4 +75,24 @@ def neck(resolution: int = 1, *, muscle_youngs: float = 6e4, max_activation: flo
     for name in NECK_MUSCLES:
         s.add_muscle(name, m.parts[name], youngs=muscle_youngs, max_activation=max_activation)
     s.resolve_fibers()
+    return s
+
+
+def chain(resolution: int = 1, *, block: float = 1.0) -> Scene:
+    """A chain of bones in the x-y plane, one block (``block``) thick: fixed bone
+    "a", movable bone "b" hinged to it (they share one block edge along z), movable
+    "c" hinged to "b" (a joint between two movable bones), muscle "m1" from a to b,
+    "m2" from b to c and "m3" from c back to a, each with fibres along (1, 1, 0).
+    EMU only: the FEM solver refuses joints between two movable bones.
+
+    8 blocks of 6 resolution^3 tets (resolution 1: 48 tets)."""
+    points, tets, labels = block_mesh(
+        {"a": [(0, 0)], "b": [(1, 1)], "c": [(2, 2)], "m1": [(0, 1)], "m2": [(1, 2)], "m3": [(2, 1), (1, 0)]},
+        resolution, size=block)
+    s = Scene(points, tets)
+    s.add_bone("a", labels == 0)
+    s.add_bone("b", labels == 1, fixed=False)
+    s.add_bone("c", labels == 2, fixed=False)
+    for i, name in enumerate(("m1", "m2", "m3")):
+        s.add_muscle(name, labels == 3 + i, [1.0, 1.0, 0.0])
     return s

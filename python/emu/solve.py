@@ -16,15 +16,22 @@ from .poses import parse_pose
 from .runtime import set_threads
 from .scene import Scene
 
-__all__ = ["Solver", "Solution", "solve", "METHODS", "STEPS", "NeutralModeWarning"]
+__all__ = ["Solver", "Solution", "solve", "METHODS", "STEPS", "NeutralModeWarning", "AccuracyWarning"]
 
 
 class NeutralModeWarning(UserWarning):
     """A movable bone can turn (or slide) with nothing resisting it: its
     equilibrium is not unique (see Solution.neutral_modes)."""
 
+
+class AccuracyWarning(UserWarning):
+    """EMU with ``accuracy=``: the error estimate stayed above the accuracy asked
+    for after every alpha tried (see Solution.accuracy_reached)."""
+
 METHODS = ("emu", "fem")
 STEPS = ("newton-krylov", "woodbury", "lbfgs")
+# how the PSD-filtered element Hessian treats a negative eigenvalue (SolverOptions::eigen_filter order)
+EIGEN_FILTERS = ("clamp", "abs")
 # accuracy= (EMU): accept a solve whose error estimate is within ACCEPT x the
 # target (the estimate was measured at 0.65-1.35 x the true error), aim new
 # alphas at AIM x the target; stop iterating when a full step moves no vertex
@@ -64,6 +71,9 @@ class Solution:
                 (error_estimate_note says why)
     inverted_tets  how many tets are inverted or collapsed at ``positions``
                 (emu.inverted_tets lists them)
+    accuracy_reached  EMU with ``accuracy=``: whether the error estimate ended
+                within the accuracy asked for (False: an AccuracyWarning, and
+                error_estimate_note says by how much it missed); None otherwise
     phase_times seconds per phase of the solve: hessian (element Hessian
                 blocks; FEM: and their assembly), preconditioner (EMU: its
                 rebuilds and the bone coarse space), linear_solve (FEM:
@@ -96,6 +106,7 @@ class Solution:
     error_estimate_note: str = ""
     phase_times: dict = field(default_factory=dict, repr=False)
     inverted_tets: int = 0           # tets with non-positive volume at the returned positions
+    accuracy_reached: bool | None = None
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
@@ -103,6 +114,8 @@ class Solution:
         est = f", {self.inverted_tets} inverted tet(s)" if self.inverted_tets else ""
         if self.error_estimate is not None:
             est += f", estimated error to FEM {self.error_estimate:.1e} of the diagonal"
+        if self.accuracy_reached is False:
+            est += f" ({self.error_estimate_note})"
         return (f"{self.label}: {state} in {self.iterations} iterations{cg}, "
                 f"{self.time_s:.3f} s (+{self.setup_time_s:.3f} s setup), |g|/|g0| = "
                 f"{self.grad_norm / self.grad_norm0 if self.grad_norm0 else 0:.2e}{est}")
@@ -150,6 +163,9 @@ class Solver:
     preconditioner_refresh  rebuild the preconditioner every n steps (Newton-Krylov: sooner if CG
                   slows); None: 3 for Newton-Krylov, 20 for L-BFGS (measured: docs/DESIGN.md)
     exact_when_definite  use the unfiltered Hessian when it is definite (see README)
+    eigen_filter  where the element Hessian is not PSD: "clamp" its negative eigenvalues
+                  to 0 (default) or reflect them, "abs" (Chen et al. 2024; measured on
+                  the stress cases in docs/stability.md: not faster here)
     bone_coarse_space  EMU with movable bones: add a coarse correction for the bones'
                   rotations to the preconditioner (fewer CG iterations; docs/DESIGN.md)
     recycled_directions  EMU with movable bones: keep the directions of up to this many
@@ -187,7 +203,8 @@ class Solver:
                  preconditioner_refresh: int | None = None, bone_coarse_space: bool = True,
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
-                 lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8):
+                 lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8,
+                 eigen_filter: str = "clamp"):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
@@ -216,6 +233,9 @@ class Solver:
         opts = _core.SolverOptions()
         opts.rtol_grad, opts.rtol_energy = float(rtol_grad), float(rtol_energy)
         opts.exact_when_definite = bool(exact_when_definite)
+        if eigen_filter not in EIGEN_FILTERS:
+            raise ValueError(f"eigen_filter must be one of {EIGEN_FILTERS}, got {eigen_filter!r}")
+        opts.eigen_filter = EIGEN_FILTERS.index(eigen_filter)
         if max_iterations is None:
             max_iterations = 200 if method == "fem" else {"newton-krylov": 500, "lbfgs": 5000}.get(step, 20000)
         opts.max_iterations = int(max_iterations)
@@ -223,7 +243,7 @@ class Solver:
             opts.step_tol = STEP_FRACTION * self.accuracy * bbox_diagonal(scene.points)
             opts.step_tol_grad = STEP_GRAD
         self.mu_ref = scene.reference_shear_modulus()
-        self.settings = dict(method=method, rtol_grad=rtol_grad, rtol_energy=rtol_energy,
+        self.settings = dict(method=method, rtol_grad=rtol_grad, rtol_energy=rtol_energy, eigen_filter=eigen_filter,
                              max_iterations=int(max_iterations), accuracy=self.accuracy)
         if lagged_factor:
             if method != "fem":
@@ -416,6 +436,17 @@ class Solver:
         sol.iterations, sol.cg_iterations, sol.phase_times = iterations, cg, phases
         sol.history = {k: np.concatenate([h[k] for h in histories]) for k in histories[0]}
         sol.settings["alpha_attempts"] = attempts
+        if sol.error_estimate is not None:
+            sol.accuracy_reached = bool(sol.error_estimate <= target)
+            if not sol.accuracy_reached:
+                # e.g. far past the activations that invert tets, where EMU and
+                # FEM find different inverted equilibria (docs/stability.md)
+                sol.error_estimate_note = f"accuracy {target:g} not reached: the error estimate is " \
+                    f"{sol.error_estimate:.2g}" + (
+                        f" after {attempts} alpha(s), up to alpha = {self.alpha:.3g} mu; use method='fem' for "
+                        "this load" if sol.converged else f" where the solve stopped ({sol.status})")
+                if sol.converged:   # a solve that stopped early says so in its status already
+                    warnings.warn(AccuracyWarning(sol.error_estimate_note), stacklevel=2)
         if sol.error_estimate is not None and sol.error_estimate < AIM * target:
             self.set_alpha(max(self.alpha * 0.5, self.alpha * sol.error_estimate / (AIM * target)))
         return sol
