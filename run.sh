@@ -3,7 +3,8 @@
 #   bash run.sh demo [emu demo options]   install what is missing, then run the demo
 #   bash run.sh test                      install what is missing, then C++ tests (ctest) and pytest
 #   bash run.sh setup                     only install
-#   bash run.sh sanitize                  the C++ core and tests under ASan + UBSan (CMakePresets.json)
+#   bash run.sh sanitize                  the C++ core, its tests and a subset of the Python tests
+#                                         under ASan + UBSan (CMakePresets.json)
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -46,19 +47,34 @@ cpp_tests() {
   (cd build/ctest && ctest --output-on-failure)
 }
 
+# the Python tests run under the sanitizers by `bash run.sh sanitize` (the solvers, bones,
+# operators, lagged factor, fuzzing and the stress suite: about 3 minutes)
+SANITIZED_TESTS="tests/test_energy.py tests/test_solvers.py tests/test_bones.py tests/test_emu_operators.py
+  tests/test_lagged_factor.py tests/test_fuzz.py tests/stress"
+
 sanitize() {
-  # the C++ core and tests under AddressSanitizer + UndefinedBehaviorSanitizer
-  # (CMakePresets.json "sanitize"; leaks detected, any report fails)
-  cmake --preset sanitize >/dev/null
+  # the C++ core, its tests and the extension under AddressSanitizer +
+  # UndefinedBehaviorSanitizer (CMakePresets.json "sanitize"; any report fails):
+  # the C++ tests with leak detection, then a subset of the Python tests on the
+  # sanitized extension (runtimes preloaded; no leak detection: CPython keeps
+  # its interned objects to the end by design)
+  cmake --preset sanitize -Dpybind11_DIR="$("$PY" -m pybind11 --cmakedir)" \
+    -DPython_EXECUTABLE="$("$PY" -c 'import sys; print(sys.executable)')" >/dev/null
   cmake --build --preset sanitize -j "$(nproc)" >/dev/null
   ctest --preset sanitize
+  local runtimes
+  runtimes="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)"
+  # shellcheck disable=SC2086
+  LD_PRELOAD="$runtimes" ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:strict_string_checks=1 \
+    UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+    "$("$PY" -c 'import sys; print(sys.executable)')" tests/sanitized.py build/sanitize -q $SANITIZED_TESTS "$@"
 }
 
 cmd="${1:-demo}"
 shift || true
 case "$cmd" in
   setup) setup ;;
-  sanitize) setup; sanitize ;;
+  sanitize) setup; sanitize "$@" ;;
   demo) setup; emu demo "$@" ;;
   test) setup; cpp_tests; "$PY" -m pytest -q tests "$@" ;;
   *) echo "usage: bash run.sh [setup|demo|test|sanitize] [options]"; exit 2 ;;
