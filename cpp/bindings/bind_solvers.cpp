@@ -113,6 +113,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("max_backtracks", &SolverOptions::max_backtracks)
       .def_readwrite("eigen_filter", &SolverOptions::eigen_filter)
       .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite)
+      .def_readwrite("negative_curvature", &SolverOptions::negative_curvature)
       .def_readwrite("lagged_cg_iterations", &SolverOptions::lagged_cg_iterations)
       .def_readwrite("lagged_cg_forcing", &SolverOptions::lagged_cg_forcing);
 
@@ -157,6 +158,7 @@ void bind_solvers(py::module_& m) {
       .def_readonly("filtered_steps", &SolveResult::filtered_steps)
       .def_readonly("exact_attempts_failed", &SolveResult::exact_attempts_failed)
       .def_readonly("factorizations", &SolveResult::factorizations)
+      .def_readonly("negative_curvature_steps", &SolveResult::negative_curvature_steps)
       .def_readonly("energy", &SolveResult::energy)
       .def_readonly("grad_norm", &SolveResult::grad_norm)
       .def_readonly("grad_norm0", &SolveResult::grad_norm0)

@@ -99,6 +99,7 @@ class Solution:
     filtered_steps: int = 0          # iterations that fell back to the PSD-filtered Hessian
     exact_attempts_failed: int = 0   # FEM: factorisations that found the exact Hessian indefinite
     factorizations: int = 0          # sparse Cholesky factorisations of a Newton matrix (FEM)
+    negative_curvature_steps: int = 0  # FEM: steps that left a saddle along negative curvature
     neutral_modes: list = field(default_factory=list)  # [(bone, unit axis)] turns nothing resists
     iterates: list | None = field(default=None, repr=False)
     error_estimate: float | None = None
@@ -163,6 +164,10 @@ class Solver:
     preconditioner_refresh  rebuild the preconditioner every n steps (Newton-Krylov: sooner if CG
                   slows); None: 3 for Newton-Krylov, 20 for L-BFGS (measured: docs/DESIGN.md)
     exact_when_definite  use the unfiltered Hessian when it is definite (see README)
+    negative_curvature  FEM: near a stationary point where the exact Hessian is
+                  indefinite (a saddle: a symmetric shape about to buckle), add its most
+                  negative curvature direction to the step (scenes without movable bones;
+                  Solution.negative_curvature_steps counts them; docs/stability.md)
     eigen_filter  where the element Hessian is not PSD: "clamp" its negative eigenvalues
                   to 0 (default) or reflect them, "abs" (Chen et al. 2024; measured on
                   the stress cases in docs/stability.md: not faster here)
@@ -204,7 +209,7 @@ class Solver:
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
                  lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8,
-                 eigen_filter: str = "clamp"):
+                 eigen_filter: str = "clamp", negative_curvature: bool = True):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
@@ -236,6 +241,7 @@ class Solver:
         if eigen_filter not in EIGEN_FILTERS:
             raise ValueError(f"eigen_filter must be one of {EIGEN_FILTERS}, got {eigen_filter!r}")
         opts.eigen_filter = EIGEN_FILTERS.index(eigen_filter)
+        opts.negative_curvature = bool(negative_curvature)
         if max_iterations is None:
             max_iterations = 200 if method == "fem" else {"newton-krylov": 500, "lbfgs": 5000}.get(step, 20000)
         opts.max_iterations = int(max_iterations)
@@ -503,6 +509,7 @@ class Solver:
                         grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
                         history=history, F=F, settings=settings, filtered_steps=r.filtered_steps,
                         exact_attempts_failed=r.exact_attempts_failed, factorizations=r.factorizations,
+                        negative_curvature_steps=r.negative_curvature_steps,
                         neutral_modes=self._neutral_modes(r), iterates=iterates, error_estimate=estimate,
                         error_estimate_time_s=estimate_s, error_estimate_note=note,
                         phase_times=_phase_times(r),

@@ -7,6 +7,7 @@
 
 #include "emu/energy/gravity_work.h"
 #include "emu/energy/material.h"
+#include "emu/linalg/negative_curvature.h"
 #include "emu/linalg/symmetric_product.h"
 #include "emu/solvers/newton/pcg.h"
 #include "emu/solvers/newton/newton_driver.h"
@@ -136,6 +137,16 @@ namespace {
 // newton_correction with a lagged factor: PCG to this fraction of the
 // gradient (the correction, an error estimate, needs a few digits).
 constexpr double kCorrectionResidual = 1e-3;
+// The negative-curvature step (add_negative_curvature): looked for where the
+// exact Hessian is indefinite and the filtered step stalls, its slope -g.d
+// (twice the decrease it predicts) at most kSaddleDecrease of the decrease so
+// far (near a stationary point; earlier, far from one, it cost iterations);
+// power iterations to kCurvatureRtol; taken where v^T H v <= (1 -
+// kCurvatureMin) v^T H+ v (clearly negative); its largest vertex move
+// kCurvatureLength of the mesh diagonal (1e-3 to 3e-2: the same within 10%).
+// Measured on the stress cases: docs/stability.md.
+constexpr double kSaddleDecrease = 1e-3, kCurvatureRtol = 1e-3, kCurvatureMin = 1.01, kCurvatureLength = 1e-2;
+constexpr int kCurvatureIterations = 40;
 }  // namespace
 
 // One FEM solve as the Newton driver sees it. The iterate is the positions x
@@ -158,6 +169,7 @@ class FemSolver::Newton {
     reduced_gradient(x_, poses_, gs_, gb_);
     gn_ = s_.bones_.gradient_norm(gs_.squaredNorm(), gb_);
     g0_ = gn_;
+    E0_ = E_;
   }
 
   double energy() const { return E_; }
@@ -211,12 +223,18 @@ class FemSolver::Newton {
     if (!have) {
       ++dir.filtered;
       assemble(false);
-      ScopedSeconds timer(time.linear_solve);
-      if (!filtered_direction())
-        return dir.fail(
-            "Newton matrix is not positive definite even after regularisation: likely a part that nothing "
-            "anchors (no pin, fixed bone or joint holds it), or collapsed tets (see scene.mesh_report and "
-            "Solution.inverted_tets)");
+      {
+        ScopedSeconds timer(time.linear_solve);
+        if (!filtered_direction())
+          return dir.fail(
+              "Newton matrix is not positive definite even after regularisation: likely a part that nothing "
+              "anchors (no pin, fixed bone or joint holds it), or collapsed tets (see scene.mesh_report and "
+              "Solution.inverted_tets)");
+      }
+      if (try_exact && s_.options_.negative_curvature && !nd_ && -slope() <= kSaddleDecrease * (E0_ - E_)) {
+        ScopedSeconds timer(time.linear_solve);
+        dir.negative_curvature = add_negative_curvature();
+      }
     }
     last_neutral_ = have ? std::vector<NeutralMode>() : neutral_;
     neutral_.clear();
@@ -379,6 +397,45 @@ class FemSolver::Newton {
     return true;
   }
 
+  // Near a stationary point where the exact Hessian H is indefinite (a saddle:
+  // a symmetric shape about to buckle) the filtered Newton step barely moves
+  // along H's negative curvature, and leaving the saddle waits for round-off
+  // to grow the asymmetry (300 steps at Poisson 0.4999: docs/stability.md).
+  // Add the direction of H's most negative curvature relative to the filtered
+  // matrix H+ just factorised (linalg/negative_curvature.h: power iteration on
+  // H+^-1 N, N = H+ - H), pointing downhill, one hundredth of the mesh
+  // diagonal long at its largest vertex move; the line search scales the sum.
+  // Returns 1 if it did (movable bones: not yet, their border is left out).
+  int add_negative_curvature() {
+    const BlockPattern& P = s_.pattern_;
+    std::vector<double> plus = s_.values_;  // H+ as factorised (with any diagonal shift)
+    s_.assemble_hessian(x_, act_, true);
+    std::vector<double>& filtered_away = s_.values_;  // N = H+ - H: PSD
+    for (size_t k = 0; k < plus.size(); ++k) filtered_away[k] = plus[k] - filtered_away[k];
+    auto product = [&P](const std::vector<double>& values) {
+      return [&P, &values](const Eigen::VectorXd& v, Eigen::VectorXd& y) {
+        y.resize(v.size());
+        symmetric_upper_product(P.rows(), P.col_ptr().data(), P.row_index().data(), values.data(), v.data(),
+                                y.data());
+      };
+    };
+    const CurvatureDirection c = most_negative_curvature(
+        gs_.size(), product(filtered_away), product(plus),
+        [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
+          z.resize(r.size());
+          s_.factor_.solve(r.data(), z.data(), 1);
+        },
+        kCurvatureIterations, kCurvatureRtol);
+    s_.values_.swap(plus);  // the factorised matrix again
+    if (!(c.mu >= kCurvatureMin)) return 0;
+    Eigen::VectorXd v = gs_.dot(c.v) > 0 ? Eigen::VectorXd(-c.v) : c.v;
+    double largest = 0;
+    for (Eigen::Index i = 0; i < v.size() / 3; ++i) largest = std::max(largest, v.segment<3>(3 * i).norm());
+    if (!(largest > 0)) return 0;
+    ds_ += (kCurvatureLength * bbox_diagonal(s_.model_.rest) / largest) * v;
+    return 1;
+  }
+
   // Projected element Hessians make H PSD; a pinned scene makes it definite.
   // Round-off can still break the Cholesky: shift the diagonal and retry.
   bool filtered_direction() {
@@ -405,7 +462,7 @@ class FemSolver::Newton {
   Eigen::VectorXd gs_, gb_, ds_, db_, y_;
   Eigen::MatrixXd Hsb_, Wsb_, Hbb_;
   Pcg<Eigen::VectorXd> pcg_;
-  double E_ = 0, gn_ = 0, g0_ = 0, last_step_ = 0;
+  double E_ = 0, E0_ = 0, gn_ = 0, g0_ = 0, last_step_ = 0;
   bool last_exact_ok_ = true, last_exact_ = false;
   std::vector<NeutralMode> neutral_, last_neutral_;  // of the current / last step
 };

@@ -28,6 +28,10 @@ struct SolverOptions {
   // Cholesky succeeds; EMU: CG sees no negative curvature); fall back to the
   // filtered one. Restores Newton's quadratic end game.
   bool exact_when_definite = true;
+  // FEM: near a stationary point where the exact Hessian is indefinite (a
+  // saddle), add its most negative curvature direction to the filtered step
+  // (FemSolver::Newton::add_negative_curvature; scenes without movable bones).
+  bool negative_curvature = true;
   // FEM: Newton-CG preconditioned by the last factorisation, kept across
   // iterations and solves (frames); a step runs PCG on the current Newton
   // matrix for at most this many iterations to |r| <= eta |g| (eta =

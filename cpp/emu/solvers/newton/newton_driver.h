@@ -36,6 +36,7 @@ struct SearchDirection {
   int filtered = 0;        // 1 if the step fell back to the PSD-filtered Hessian
   int exact_failed = 0;    // failed factorisations of the exact Hessian
   int factorizations = 0;  // sparse Cholesky factorisations made for it
+  int negative_curvature = 0;  // 1 if it includes a negative-curvature direction (FEM at a saddle)
   /// This direction marked as failed (its counters kept for the result).
   SearchDirection& fail(std::string why) {
     ok = false;
@@ -76,6 +77,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     res.filtered_steps += d.filtered;
     res.exact_attempts_failed += d.exact_failed;
     res.factorizations += d.factorizations;
+    res.negative_curvature_steps += d.negative_curvature;
     if (!d.ok) {
       res.status = d.failure;
       break;

@@ -39,6 +39,7 @@ struct SolveResult {
   int filtered_steps = 0;  // iterations that needed the PSD-filtered Hessian (not the exact one)
   int exact_attempts_failed = 0;  // FEM: factorisations of the exact Hessian that found it indefinite
   int factorizations = 0;  // sparse Cholesky factorisations of a Newton matrix (FEM; EMU's Schur rebuilds)
+  int negative_curvature_steps = 0;  // FEM: steps that added a negative-curvature direction (saddles)
   double energy = 0, grad_norm = 0, grad_norm0 = 0, rel_energy_change = 0;
   double time_s = 0;  // solve time (setup excluded)
   PhaseTimes phases;
