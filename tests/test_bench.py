@@ -115,3 +115,12 @@ def test_stability_table_small():
     rows = [line for line in out.splitlines() if line.startswith("| k = ") or line.startswith("| coordinates")]
     assert len(rows) == 3 + 4                       # k (0, 96, 300): EMU only; scales: both methods
     assert all("| converged |" in r for r in rows)
+
+
+def test_eigen_filter_table_small():
+    out = run(BENCH / "eigen_filter.py", "--cases", "poisson_4999")
+    rows = [line.split("|") for line in out.splitlines() if line.startswith("| poisson_4999 |")]
+    assert len(rows) == 6 and all(r[4].strip() == "converged" for r in rows)
+    newton = {r[3].strip(): int(r[5].split("/")[0]) for r in rows if r[2].strip() == "fem"}
+    # the negative-curvature step shortens the escape from the saddle
+    assert newton["eigen_filter=clamp"] < newton["eigen_filter=clamp, negative_curvature=False"]
