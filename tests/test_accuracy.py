@@ -19,7 +19,10 @@ def test_emu_meets_the_accuracy_it_is_given(scene_with_fem, target):
     assert emu.vertex_error(sol, fem) <= target
     assert sol.error_estimate <= 0.6 * target
     assert sol.settings["accuracy"] == target
-    assert solver.alpha <= sol.settings["alpha"]   # the next solve starts from this alpha or a lower one
+    if sol.corrected:   # EMU's own answer missed: the next solve starts from a larger alpha
+        assert solver.alpha > sol.settings["alpha"] and sol.settings["alpha_attempts"] == 1
+    else:               # the next solve starts from this alpha or a lower one
+        assert solver.alpha <= sol.settings["alpha"]
 
 
 def test_emu_raises_alpha_where_the_default_misses_the_target():
@@ -27,13 +30,39 @@ def test_emu_raises_alpha_where_the_default_misses_the_target():
     fem = emu.solve(s, {"belly": 5e4}, "fem", rtol_grad=1e-9)
     plain = emu.solve(s, {"belly": 5e4}, "emu", alpha=100.0)
     assert emu.vertex_error(plain, fem) > 0.005          # alpha = 100 mu misses 0.5% here
-    solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005)
+    solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005, fem_correction=False)
     sol = solver.solve({"belly": 5e4})
-    assert sol.settings["alpha_attempts"] >= 2 and solver.alpha > 100.0
+    assert sol.settings["alpha_attempts"] >= 2 and solver.alpha > 100.0 and not sol.corrected
     assert emu.vertex_error(sol, fem) <= 0.005
     # the next solve starts from the alpha found (a sequence's next frame)
     again = solver.solve({"belly": 5e4}, initial=sol)
     assert again.settings["alpha_attempts"] == 1 and emu.vertex_error(again, fem) <= 0.005
+
+
+def test_emu_answer_is_corrected_by_fem_where_its_estimate_misses():
+    """Where alpha = 100 mu misses the target, accuracy mode's default returns
+    EMU's answer corrected by two FEM Newton steps (they contract) instead of
+    re-solving: one EMU solve, alpha unchanged, within the target, and the
+    estimate (the last step's length) at least the true error; EMU's own
+    answer and its F are kept."""
+    s = fusiform(2, warn=False)
+    fem = emu.solve(s, {"belly": 5e4}, "fem", rtol_grad=1e-9)
+    solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005)
+    sol = solver.solve({"belly": 5e4})
+    assert sol.converged and sol.corrected
+    assert sol.settings["alpha_attempts"] == 1 and sol.settings["alpha"] == 100.0
+    assert solver.alpha > 100.0          # the next solve starts where a re-solve would have
+    assert emu.vertex_error(sol.emu_positions, fem) > 0.005           # EMU's own answer misses
+    assert emu.vertex_error(sol.emu_positions, sol.fem_correction) > 0.6 * 0.005   # and its estimate says so
+    err = emu.vertex_error(sol, fem)
+    assert err <= 0.005 and sol.error_estimate <= 0.6 * 0.005 and err <= sol.error_estimate
+    assert "corrected" in sol.summary() and "corrected" in sol.error_estimate_note
+    # F is EMU's: its fit is emu_positions, and it warm-starts the next solve
+    assert sol.F.shape == (len(s.tets), 3, 3)
+    again = solver.solve({"belly": 5e4}, initial=sol)
+    assert again.converged and emu.vertex_error(again, fem) <= 0.005
+    plain = emu.Solver(s, "emu", alpha=100.0).solve({"belly": 5e4})
+    assert not plain.corrected and plain.positions is plain.emu_positions
 
 
 def test_fem_stops_early_within_the_target(scene_with_fem):

@@ -57,7 +57,7 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                                   "solve_s": sol.time_s, "alpha": sol.settings.get("alpha"),
                                   "error_estimate": sol.error_estimate,
                                   "error_estimate_s": sol.error_estimate_time_s,
-                                  "accuracy_reached": sol.accuracy_reached,
+                                  "accuracy_reached": sol.accuracy_reached, "fem_corrected": sol.corrected,
                                   "inverted_tets": sol.inverted_tets})
             if on_frame is not None:
                 on_frame(k, sol)
@@ -69,6 +69,8 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                 est += f", {sol.inverted_tets} inverted tet(s)"
             if sol.accuracy_reached is False:
                 est += f" ({sol.error_estimate_note})"
+            if sol.corrected:
+                est += " (FEM-corrected)"
             progress(f"frame {k + 1}/{spec.frames}: {sol.iterations} it"
                      + (f" ({sol.cg_iterations} CG)" if sol.cg_iterations else "")
                      + f", E = {sol.energy:.6g}, {sol.time_s:.2f} s{est}, ~{left:.0f} s left{flag}")
