@@ -124,3 +124,13 @@ def test_eigen_filter_table_small():
     newton = {r[3].strip(): int(r[5].split("/")[0]) for r in rows if r[2].strip() == "fem"}
     # the negative-curvature step shortens the escape from the saddle
     assert newton["eigen_filter=clamp"] < newton["eigen_filter=clamp, negative_curvature=False"]
+
+
+def test_accuracy_mode_table_small():
+    out = run(BENCH / "accuracy_mode.py", "--scenes", "fusiform_r3")
+    row = next(line for line in out.splitlines() if line.startswith("| fusiform_r3 |"))
+    cells = [c.strip() for c in row.split("|")[1:-1]]
+    resolve, corrected = cells[4], cells[5]
+    assert resolve.split("(")[1].startswith("2,")          # alpha = 100 mu misses: a re-solve ...
+    solves, was_corrected, _, error = corrected.split("(")[1].rstrip(")").split(", ")
+    assert solves == "1" and was_corrected == "yes" and float(error) <= 0.01   # ... or one solve, corrected
