@@ -53,6 +53,20 @@ def test_scene_file_loads(tmp_path):
     assert load_scene_file(js).frames == 3
 
 
+def test_scene_file_solver_options_reach_the_solver(tmp_path):
+    """The [solver] options added with the stress suite and accuracy mode's
+    corrections are accepted and passed on to emu.Solver."""
+    text = GOOD.replace('alpha = 100.0', 'accuracy = 0.01\nfem_correction = false\neigen_filter = "abs"\n'
+                        'negative_curvature = false\nrecycled_directions = 2')
+    spec = load_scene_file(write(tmp_path, text))
+    solver = emu.Solver(spec.scene, **spec.solver)
+    assert solver.settings["fem_correction"] is False and solver.settings["eigen_filter"] == "abs"
+    fem = emu.Solver(spec.scene, **{**spec.solver, "method": "fem", "fem_correction": True})
+    assert fem.settings["fem_correction"] is False   # an EMU option: FEM has none
+    with pytest.raises(SceneFileError, match="solver.fem_correction"):
+        load_scene_file(write(tmp_path, GOOD.replace('alpha = 100.0', 'fem_correction = "yes"'), "bad.toml"))
+
+
 def test_fusiform_mesh_is_the_built_in_scene(tmp_path):
     """[mesh.fusiform] is emu.scenes.fusiform: same mesh, parts and fibres, and
     the pins named in the file are its vertex sets."""

@@ -446,8 +446,7 @@ class Solver:
         total_s, estimate_s, attempts = sol.time_s, sol.error_estimate_time_s, 1
         iterations, cg, histories = sol.iterations, sol.cg_iterations, [sol.history]
         phases = dict(sol.phase_times)
-        while (sol.converged and sol.error_estimate is not None and sol.error_estimate > ACCEPT * target
-               and attempts < MAX_ALPHA_ATTEMPTS):
+        while sol.converged and sol.error_estimate is not None and sol.error_estimate > ACCEPT * target:
             factor = min(30.0, max(1.5, (sol.error_estimate / (AIM * target)) ** (1 / 0.75)))
             spent = sol.error_estimate_time_s
             if self.fem_correction and self._correct(load, sol, target):
@@ -458,6 +457,8 @@ class Solver:
                 self.set_alpha(self.alpha * factor)
                 if iterates is not None:   # the corrected answer, when it exists: after the estimates
                     iterates.append((total_s + estimate_s, sol.positions))
+                break
+            if attempts >= MAX_ALPHA_ATTEMPTS:
                 break
             self.set_alpha(self.alpha * factor)
             # a warm start at a larger alpha: CG to the tight forcing term, so

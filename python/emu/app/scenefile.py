@@ -38,6 +38,9 @@
     rtol_grad = 1e-6
     rtol_energy = 1e-10
     max_iterations = 500
+    fem_correction = true        # accuracy mode: FEM-correct EMU's answer where its estimate misses
+    lagged_factor = false        # FEM: Newton-CG on a lagged Cholesky factor
+    eigen_filter = "clamp"       # or "abs"; negative_curvature = true (FEM at saddles)
     threads = 2
 
     [frames]
@@ -106,7 +109,8 @@ _SCHEMA = {
     "solver": {"method": str, "alpha": float, "modes": int, "step": str, "rtol_grad": float,
                "rtol_energy": float, "max_iterations": int, "cg_max_iterations": int, "preconditioner": str,
                "preconditioner_refresh": int, "exact_when_definite": bool, "threads": int,
-               "bone_coarse_space": bool, "accuracy": float, "error_estimate": bool},
+               "bone_coarse_space": bool, "accuracy": float, "error_estimate": bool, "fem_correction": bool,
+               "lagged_factor": bool, "recycled_directions": int, "eigen_filter": str, "negative_curvature": bool},
     "frames": {"count": int, "dt": float},
     "activation": "table of tables",
     "bones": "table of tables",
