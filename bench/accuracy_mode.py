@@ -26,6 +26,8 @@ def main(argv=None):
     ap.add_argument("--scenes", nargs="*", default=DEFAULT_SCENES, choices=list(SCENES))
     ap.add_argument("--target", type=float, default=0.01)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--emu-step-fraction", type=float, default=None,
+                    help="EMU's accuracy stopping rule: a full step under this fraction of the target (default: the Solver's)")
     a = ap.parse_args(argv)
     start_run(a.threads)
     print("| scene | FEM s | FEM lagged s | FEM accuracy s (error) | EMU re-solving s (solves, error) | "
@@ -39,7 +41,8 @@ def main(argv=None):
             fem = emu.Solver(scene, "fem").solve(act, normalized=normalized)
             lagged = emu.Solver(scene, "fem", lagged_factor=True).solve(act, normalized=normalized)
             fem_a = emu.Solver(scene, "fem", accuracy=a.target).solve(act, normalized=normalized)
-            runs = [emu.Solver(scene, "emu", accuracy=a.target, fem_correction=c).solve(act, normalized=normalized)
+            runs = [emu.Solver(scene, "emu", accuracy=a.target, fem_correction=c,
+                               step_fraction=a.emu_step_fraction).solve(act, normalized=normalized)
                     for c in (False, True)]
         cells = [f"{fem.time_s:.2f}", f"{lagged.time_s:.2f}",
                  f"{fem_a.time_s:.2f} ({emu.vertex_error(fem_a, ref):.1e})"]

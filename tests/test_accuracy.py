@@ -65,6 +65,22 @@ def test_emu_answer_is_corrected_by_fem_where_its_estimate_misses():
     assert not plain.corrected and plain.positions is plain.emu_positions
 
 
+def test_step_fraction_sets_the_stopping_rule():
+    """A looser step test (step_fraction 0.3 of the target instead of the
+    default 0.1) stops EMU's solve in fewer iterations; with the FEM correction
+    the answer stays within the target; bad values are refused."""
+    s = emu.scenes.arm(1)
+    act = {"flexor": 0.45}
+    fem = emu.solve(s, act, "fem", normalized=True, rtol_grad=1e-9)
+    tight = emu.Solver(s, "emu", accuracy=0.01).solve(act, normalized=True)   # the default: 0.1
+    loose = emu.Solver(s, "emu", accuracy=0.01, step_fraction=0.3).solve(act, normalized=True)
+    assert loose.iterations < tight.iterations and "step_tol" in loose.status
+    assert loose.settings["step_fraction"] == 0.3 and tight.settings["step_fraction"] == 0.1
+    assert emu.vertex_error(loose, fem) <= 0.01 and emu.vertex_error(tight, fem) <= 0.01
+    with pytest.raises(ValueError, match="step_fraction"):
+        emu.Solver(s, "emu", accuracy=0.01, step_fraction=1.5)
+
+
 def test_fem_stops_early_within_the_target(scene_with_fem):
     scene, act, normalized, fem = scene_with_fem
     strict = emu.Solver(scene, "fem").solve(act, normalized=normalized)

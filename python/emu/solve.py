@@ -212,6 +212,9 @@ class Solver:
                   warm-started at a larger alpha when it is not, and carries
                   the alpha over to the next solve (``solver.alpha``)
 
+    step_fraction  with ``accuracy``: stop when a full step moves no vertex by more than
+                  this fraction of it (None: 0.1; 0.3 with EMU's FEM correction is faster on
+                  two of eight scenes and worse far past inversion: docs/DESIGN.md)
     fem_correction  EMU with ``accuracy``: where EMU's estimate misses the accuracy,
                   return its answer corrected by FEM Newton steps (the one the
                   estimate computed and one more, on the estimator's lagged
@@ -235,7 +238,8 @@ class Solver:
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
                  lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8,
-                 eigen_filter: str = "clamp", negative_curvature: bool = True, fem_correction: bool = True):
+                 eigen_filter: str = "clamp", negative_curvature: bool = True, fem_correction: bool = True,
+                 step_fraction: float | None = None):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
@@ -271,11 +275,16 @@ class Solver:
         if max_iterations is None:
             max_iterations = 200 if method == "fem" else {"newton-krylov": 500, "lbfgs": 5000}.get(step, 20000)
         opts.max_iterations = int(max_iterations)
+        if step_fraction is None:
+            step_fraction = STEP_FRACTION
+        if not (isinstance(step_fraction, (int, float)) and 0 < step_fraction <= 1):
+            raise ValueError(f"step_fraction must lie in (0, 1], got {step_fraction!r}")
         if self.accuracy is not None:
-            opts.step_tol = STEP_FRACTION * self.accuracy * bbox_diagonal(scene.points)
+            opts.step_tol = float(step_fraction) * self.accuracy * bbox_diagonal(scene.points)
             opts.step_tol_grad = STEP_GRAD
         self.mu_ref = scene.reference_shear_modulus()
         self.settings = dict(method=method, rtol_grad=rtol_grad, rtol_energy=rtol_energy, eigen_filter=eigen_filter,
+                             step_fraction=float(step_fraction),
                              max_iterations=int(max_iterations), accuracy=self.accuracy)
         if lagged_factor:
             if method != "fem":
