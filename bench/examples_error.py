@@ -1,7 +1,10 @@
 """Every example scene file with its own settings (EMU's default accuracy 0.01):
 EMU's largest vertex error to FEM over all frames, its own estimate, times.
 
-    python bench/examples_error.py [examples/*.toml]
+    python bench/examples_error.py [examples/*.toml] [--emu-step-fraction F]
+
+--emu-step-fraction F: EMU's accuracy stopping rule at F of the target
+instead of the scene's (Solver(step_fraction=F)).
 """
 from __future__ import annotations
 
@@ -18,8 +21,13 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 def main(argv=None):
-    paths = (argv if argv is not None else sys.argv[1:]) or sorted(glob.glob(os.path.join(HERE, "..", "examples",
-                                                                                          "*.toml")))
+    args = list(argv if argv is not None else sys.argv[1:])
+    extra = {}
+    if "--emu-step-fraction" in args:
+        i = args.index("--emu-step-fraction")
+        extra["step_fraction"] = float(args[i + 1])
+        del args[i:i + 2]
+    paths = args or sorted(glob.glob(os.path.join(HERE, "..", "examples", "*.toml")))
     warnings.simplefilter("ignore")
     i = emu.info()
     print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {i['omp_threads']}; {time.strftime('%Y-%m-%d')}\n")
@@ -28,7 +36,7 @@ def main(argv=None):
     print("|---|---|---|---|---|---|---|---|---|")
     for path in paths:
         spec = load_scene_file(path)
-        emu_solver = emu.Solver(spec.scene, **{**spec.solver, "method": "emu"})
+        emu_solver = emu.Solver(spec.scene, **{**spec.solver, "method": "emu", **extra})
         fem_solver = emu.Solver(spec.scene, "fem", rtol_grad=1e-9)
         prev_e = prev_f = None
         worst = worst_est = 0.0
