@@ -253,10 +253,11 @@ def row(case: Case, method, out: Outcome):
         return f"| {case.label} | {method} | refused: {out.refused.split(';')[0]} | - | - | - | - | {out.seconds:.2f} |"
     sols = out.solutions
     done = sum(s.converged for s in sols)
+    corrected = sum(s.corrected for s in sols)
     if len(sols) == 1:
-        state = "converged" if done else sols[0].status.split(":")[0]
+        state = ("converged" if done else sols[0].status.split(":")[0]) + (", FEM-corrected" if corrected else "")
     else:
-        state = f"{done} / {len(sols)} frames converged"
+        state = f"{done} / {len(sols)} frames converged" + (f", {corrected} FEM-corrected" if corrected else "")
     its = sum(s.iterations for s in sols)
     cg = sum(s.cg_iterations for s in sols)
     # a sequence: the largest final |g| of a frame over the largest |g0| of any (a frame warm-started
