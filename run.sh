@@ -58,16 +58,16 @@ sanitize() {
   # the C++ tests with leak detection, then a subset of the Python tests on the
   # sanitized extension (runtimes preloaded; no leak detection: CPython keeps
   # its interned objects to the end by design)
-  cmake --preset sanitize -Dpybind11_DIR="$("$PY" -m pybind11 --cmakedir)" \
-    -DPython_EXECUTABLE="$("$PY" -c 'import sys; print(sys.executable)')" >/dev/null
+  local python runtimes
+  python="$("$PY" -c 'import sys; print(sys.executable)')"   # the interpreter itself, not a shim script
+  cmake --preset sanitize -Dpybind11_DIR="$("$PY" -m pybind11 --cmakedir)" -DPython_EXECUTABLE="$python" >/dev/null
   cmake --build --preset sanitize -j "$(nproc)" >/dev/null
   ctest --preset sanitize
-  local runtimes
   runtimes="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)"
   # shellcheck disable=SC2086
   LD_PRELOAD="$runtimes" ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:strict_string_checks=1 \
     UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-    "$("$PY" -c 'import sys; print(sys.executable)')" tests/sanitized.py build/sanitize -q $SANITIZED_TESTS "$@"
+    "$python" tests/sanitized.py build/sanitize -q $SANITIZED_TESTS "$@"
 }
 
 cmd="${1:-demo}"

@@ -41,9 +41,9 @@ def main(argv=None):
             fem = emu.Solver(scene, "fem").solve(act, normalized=normalized)
             lagged = emu.Solver(scene, "fem", lagged_factor=True).solve(act, normalized=normalized)
             fem_a = emu.Solver(scene, "fem", accuracy=a.target).solve(act, normalized=normalized)
-            runs = [emu.Solver(scene, "emu", accuracy=a.target, fem_correction=c,
-                               step_fraction=a.emu_step_fraction).solve(act, normalized=normalized)
-                    for c in (False, True)]
+            fraction = {} if a.emu_step_fraction is None else {"step_fraction": a.emu_step_fraction}
+            runs = [emu.Solver(scene, "emu", accuracy=a.target, fem_correction=c, **fraction)
+                    .solve(act, normalized=normalized) for c in (False, True)]
         cells = [f"{fem.time_s:.2f}", f"{lagged.time_s:.2f}",
                  f"{fem_a.time_s:.2f} ({emu.vertex_error(fem_a, ref):.1e})"]
         resolve, corrected = runs

@@ -96,14 +96,19 @@ def sliver_bar(volume_ratio):
     return pinned_bar(best[1], tets)
 
 
-def inverted_bar():
-    """The pinned bar with every other tet's vertex order reversed (negative rest
-    volume): emu reorients them (with a MeshWarning) and must solve as if it were
-    given the oriented mesh."""
-    points, tets = bar()
+def every_other_flipped(tets):
+    """tets (m, 4) with every other tet's vertex order reversed (negative volume)."""
     tets = tets.copy()
     tets[::2] = tets[::2][:, [0, 2, 1, 3]]
-    return pinned_bar(points, tets)
+    return tets
+
+
+def inverted_bar():
+    """The pinned bar with every other tet given with negative rest volume: emu
+    reorients them (with a MeshWarning) and must solve as if it were given the
+    oriented mesh."""
+    points, tets = bar()
+    return pinned_bar(points, every_other_flipped(tets))
 
 
 def single_tet():
@@ -165,53 +170,49 @@ class Case:
         return self.activation(k) if callable(self.activation) else self.activation
 
 
-def _case(label, scene, activation, **kw):
-    return Case(label, scene, activation, **kw)
-
-
 NO_FIBRES = "no fibres and 0 bone attachment"
 CASES = {
-    "tendon_ratio": [_case(f"tendon / muscle {r:g}", lambda r=r: pinned_muscle(tendon_ratio=r), {"belly": 5e4})
+    "tendon_ratio": [Case(f"tendon / muscle {r:g}", lambda r=r: pinned_muscle(tendon_ratio=r), {"belly": 5e4})
                      for r in (1, 1e3, 1e5, 1e7)],
-    "poisson": [_case(f"Poisson {nu:g}", lambda nu=nu: pinned_muscle(poisson=nu), {"belly": 5e4})
+    "poisson": [Case(f"Poisson {nu:g}", lambda nu=nu: pinned_muscle(poisson=nu), {"belly": 5e4})
                 for nu in (0.45, 0.49, 0.499, 0.4999)],
-    "activation": [_case(f"activation {a:g}", pinned_muscle, {"belly": a})
+    "activation": [Case(f"activation {a:g}", pinned_muscle, {"belly": a})
                    for a in (0.0, 1e4, 1e5, 1e6, 1e8, 1e9, 1e10, 1e12)],
-    "scale": [_case(f"coordinates x {c:g}", lambda c=c: pinned_muscle(scale=c), {"belly": 5e4}) for c in (1e-4, 1e4)],
-    "alpha": [_case(f"alpha {a:g} mu", pinned_muscle, {"belly": 5e4}, emu=dict(alpha=a)) for a in (1e-2, 1e2, 1e8)],
-    "modes": [_case(f"k = {k}", pinned_muscle, {"belly": 5e4}, emu=dict(modes=k, alpha=100.0)) for k in (0, 96, 300)],
+    "scale": [Case(f"coordinates x {c:g}", lambda c=c: pinned_muscle(scale=c), {"belly": 5e4}) for c in (1e-4, 1e4)],
+    "alpha": [Case(f"alpha {a:g} mu", pinned_muscle, {"belly": 5e4}, emu=dict(alpha=a)) for a in (1e-2, 1e2, 1e8)],
+    "modes": [Case(f"k = {k}", pinned_muscle, {"belly": 5e4}, emu=dict(modes=k, alpha=100.0)) for k in (0, 96, 300)],
     "bones": [
-        _case("fixed bones (arm, forearm fixed), flexor 1e6", lambda: arm(forearm_fixed=True), {"flexor": 1e6}),
-        _case("hinge (arm), flexor 1e5", arm, {"flexor": 1e5}),
-        _case("hinge (arm), flexor 1e8", arm, {"flexor": 1e8}),
-        _case("ball joint (neck), left_front 1e5", lambda: emu.scenes.neck(1), {"left_front": 1e5}),
-        _case("ball joint (neck), left_front 1e8", lambda: emu.scenes.neck(1), {"left_front": 1e8}),
-        _case("chain (two movable bones), m1 + m2 2e4", lambda: emu.scenes.chain(1), {"m1": 2e4, "m2": 2e4},
+        Case("fixed bones (arm, forearm fixed), flexor 1e6", lambda: arm(forearm_fixed=True), {"flexor": 1e6}),
+        Case("hinge (arm), flexor 1e5", arm, {"flexor": 1e5}),
+        Case("hinge (arm), flexor 1e8", arm, {"flexor": 1e8}),
+        Case("ball joint (neck), left_front 1e5", lambda: emu.scenes.neck(1), {"left_front": 1e5}),
+        Case("ball joint (neck), left_front 1e8", lambda: emu.scenes.neck(1), {"left_front": 1e8}),
+        Case("chain (two movable bones), m1 + m2 2e4", lambda: emu.scenes.chain(1), {"m1": 2e4, "m2": 2e4},
               refuses={"fem": "two movable bones"}),
     ],
-    "bone_stiffness": [_case(f"hinge, bone / muscle {r:g}", lambda r=r: arm(bone_ratio=r), {"flexor": 1e6})
+    "bone_stiffness": [Case(f"hinge, bone / muscle {r:g}", lambda r=r: arm(bone_ratio=r), {"flexor": 1e6})
                        for r in (1e3, 1e8)]
-    + [_case(f"hinge, bone ACAP weight {w:g}", lambda w=w: arm(bone_acap_weight=w), {"flexor": 1e6},
+    + [Case(f"hinge, bone ACAP weight {w:g}", lambda w=w: arm(bone_acap_weight=w), {"flexor": 1e6},
              emu=dict(accuracy=0.01)) for w in (1e2, 1e8)]
-    + [_case(f"hinge, joint stiffness {k:g}", lambda k=k: arm(joint_stiffness=k), {"flexor": 1e6})
+    + [Case(f"hinge, joint stiffness {k:g}", lambda k=k: arm(joint_stiffness=k), {"flexor": 1e6})
        for k in (1e-2, 1e3)],
     "sequence": [
-        _case(f"pinned muscle, {FRAMES} frames, jumps 0 <-> 1e6", pinned_muscle, jumps(["belly"], 0.0, 1e6),
+        Case(f"pinned muscle, {FRAMES} frames, jumps 0 <-> 1e6", pinned_muscle, jumps(["belly"], 0.0, 1e6),
               frames=FRAMES),
-        _case(f"hinge (arm), {FRAMES} frames, jumps 0 <-> 1e6", arm, jumps(["flexor", "extensor"], 0.0, 1e6),
+        Case(f"hinge (arm), {FRAMES} frames, jumps 0 <-> 1e6", arm, jumps(["flexor", "extensor"], 0.0, 1e6),
               frames=FRAMES),
-        _case(f"ball joint (neck), {FRAMES} frames, jumps 0 <-> 1e6", lambda: emu.scenes.neck(1),
+        Case(f"ball joint (neck), {FRAMES} frames, jumps 0 <-> 1e6", lambda: emu.scenes.neck(1),
               jumps(list(emu.meshes.NECK_MUSCLES), 0.0, 1e6), frames=FRAMES),
     ],
     "mesh": [
-        _case("two sliver tets (volume x 1e-3)", lambda: sliver_bar(1e-3), {"belly": 1e5}),
-        _case("two near-zero-volume tets (x 1e-8)", lambda: sliver_bar(1e-8), {"belly": 1e5}),
-        _case("half the rest tets inverted", inverted_bar, {"belly": 1e5}),
-        _case("a single-tet muscle", single_tet, {"belly": 1e5}),
-        _case("disconnected parts, both pinned", two_bars, {"belly": 1e5, "second": 5e4}),
-        _case("disconnected parts, one unpinned", lambda: two_bars(second_pinned=False), {"belly": 1e5},
+        Case("two sliver tets (volume x 1e-3)", lambda: sliver_bar(1e-3), {"belly": 1e5}),
+        Case("two near-zero-volume tets (x 1e-8)", lambda: sliver_bar(1e-8), {"belly": 1e5}),
+        Case("half the rest tets inverted", inverted_bar, {"belly": 1e5}),
+        Case("a single-tet muscle", single_tet, {"belly": 1e5}),
+        Case("disconnected parts, both pinned", two_bars, {"belly": 1e5, "second": 5e4}),
+        Case("disconnected parts, one unpinned", lambda: two_bars(second_pinned=False), {"belly": 1e5},
               refuses={"*": "no pinned vertex"}),
-        _case("a muscle without fibres", lambda: pinned_bar(*bar(), fibers=None), {"belly": 1e5},
+        Case("a muscle without fibres", lambda: pinned_bar(*bar(), fibers=None), {"belly": 1e5},
               refuses={"*": NO_FIBRES}),
     ],
 }

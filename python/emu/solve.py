@@ -213,7 +213,7 @@ class Solver:
                   the alpha over to the next solve (``solver.alpha``)
 
     step_fraction  with ``accuracy``: stop when a full step moves no vertex by more than
-                  this fraction of it (None: 0.1; 0.3 with EMU's FEM correction is faster on
+                  this fraction of it (0.1; 0.3 with EMU's FEM correction is faster on
                   two of eight scenes and worse far past inversion: docs/DESIGN.md)
     fem_correction  EMU with ``accuracy``: where EMU's estimate misses the accuracy,
                   return its answer corrected by FEM Newton steps (the one the
@@ -239,7 +239,7 @@ class Solver:
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
                  lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8,
                  eigen_filter: str = "clamp", negative_curvature: bool = True, fem_correction: bool = True,
-                 step_fraction: float | None = None):
+                 step_fraction: float = STEP_FRACTION):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
@@ -275,8 +275,6 @@ class Solver:
         if max_iterations is None:
             max_iterations = 200 if method == "fem" else {"newton-krylov": 500, "lbfgs": 5000}.get(step, 20000)
         opts.max_iterations = int(max_iterations)
-        if step_fraction is None:
-            step_fraction = STEP_FRACTION
         if not (isinstance(step_fraction, (int, float)) and 0 < step_fraction <= 1):
             raise ValueError(f"step_fraction must lie in (0, 1], got {step_fraction!r}")
         if self.accuracy is not None:
@@ -457,12 +455,13 @@ class Solver:
         phases = dict(sol.phase_times)
         while sol.converged and sol.error_estimate is not None and sol.error_estimate > ACCEPT * target:
             factor = min(30.0, max(1.5, (sol.error_estimate / (AIM * target)) ** (1 / 0.75)))
-            spent = sol.error_estimate_time_s
-            if self.fem_correction and self._correct(load, sol, target):
+            t0 = time.perf_counter()
+            corrected = self.fem_correction and self._correct(load, sol, target)
+            estimate_s += time.perf_counter() - t0   # the correction counts as estimation time
+            if corrected:
                 # this answer is FEM-corrected; the next solve (a sequence's next
                 # frame) starts at the alpha a re-solve would have used, so that
                 # EMU's own answers stay near the target and corrections the exception
-                estimate_s += sol.error_estimate_time_s - spent
                 self.set_alpha(self.alpha * factor)
                 if iterates is not None:   # the corrected answer, when it exists: after the estimates
                     iterates.append((total_s + estimate_s, sol.positions))
@@ -513,24 +512,21 @@ class Solver:
         make x2 the solution's positions with |x2 - x1| as its estimate (x2 is
         closer than that where they contract) and return True; else leave the
         solution as it was (the caller re-solves at a larger alpha)."""
-        x1 = sol.fem_correction
+        x1, own = sol.fem_correction, sol.error_estimate   # own = vertex_error(emu_positions, x1)
         if x1 is None:
             return False
-        t0 = time.perf_counter()
         try:
             x2 = self._estimator.newton_correction(load, x1, max_steps=1)
         except RuntimeError:
             return False
-        finally:
-            sol.error_estimate_time_s += time.perf_counter() - t0
         if not np.all(np.isfinite(x2)):
             return False
         step = vertex_error(x1, x2)
-        if not (step <= CORRECTION_CONTRACTION * sol.error_estimate and step <= ACCEPT * target):
+        if not (step <= CORRECTION_CONTRACTION * own and step <= ACCEPT * target):
             return False
         sol.positions, sol.corrected, sol.error_estimate = x2, True, step
-        sol.error_estimate_note = (f"EMU's answer (estimated {vertex_error(sol.emu_positions, x1):.2g} from FEM's) "
-                                   f"corrected by two FEM Newton steps; the estimate is the last step's length")
+        sol.error_estimate_note = (f"EMU's answer (estimated {own:.2g} from FEM's) corrected by two FEM Newton "
+                                   "steps; the estimate is the last step's length")
         sol.inverted_tets = len(inverted_tets(self.scene.tets, x2))
         return True
 
