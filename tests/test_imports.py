@@ -21,7 +21,7 @@ LAYERS = {
     # numerics and data with no notion of a scene
     "core": {"_core", "geometry", "checks", "activation", "poses", "meshes", "fibers", "runtime"},
     # the scene, its parts and joints, the lowering to the C++ model, built-in scenes
-    "model": {"parts", "joints", "scene", "lowering", "scenes"},
+    "model": {"parts", "joints", "contact", "scene", "lowering", "scenes"},
     # solving a scene and measuring a solution
     "solve": {"solve", "bones"},
     # files in and out (never the solver)

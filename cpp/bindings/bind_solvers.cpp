@@ -1,6 +1,8 @@
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
+#include <memory>
+
 #include "bind.h"
 #include "emu/model/model.h"
 #include "emu/solvers/emu_solver.h"
@@ -30,6 +32,40 @@ SolveResult run_solve(F&& f) {
   }
   if (PyErr_Occurred()) throw py::error_already_set();
   return r;
+}
+
+// A Python contact term (emu.contact.ContactTerm: energy, gradient, hessian,
+// max_step of #V by 3 positions) as the solvers' PositionTerm. The object is
+// held by a shared_ptr whose deleter takes the GIL, so SolverOptions can be
+// copied and destroyed without it; each call takes the GIL and lets a Python
+// exception propagate (the solvers call it outside OpenMP regions).
+PositionTerm python_position_term(const py::object& obj) {
+  std::shared_ptr<py::object> o(new py::object(obj), [](py::object* p) {
+    py::gil_scoped_acquire gil;
+    delete p;
+  });
+  PositionTerm t;
+  t.energy = [o](const Eigen::MatrixX3d& x) {
+    py::gil_scoped_acquire gil;
+    return o->attr("energy")(Eigen::MatrixX3d(x)).cast<double>();
+  };
+  t.gradient = [o](const Eigen::MatrixX3d& x) {
+    py::gil_scoped_acquire gil;
+    return o->attr("gradient")(Eigen::MatrixX3d(x)).cast<Eigen::MatrixX3d>();
+  };
+  t.hessian = [o](const Eigen::MatrixX3d& x) {
+    py::gil_scoped_acquire gil;
+    return o->attr("hessian")(Eigen::MatrixX3d(x)).cast<Eigen::SparseMatrix<double>>();
+  };
+  t.max_step = [o](const Eigen::MatrixX3d& x0, const Eigen::MatrixX3d& x1) {
+    py::gil_scoped_acquire gil;
+    return o->attr("max_step")(Eigen::MatrixX3d(x0), Eigen::MatrixX3d(x1)).cast<double>();
+  };
+  t.check_start = [o](const Eigen::MatrixX3d& x) {
+    py::gil_scoped_acquire gil;
+    o->attr("check_start")(Eigen::MatrixX3d(x));
+  };
+  return t;
 }
 
 py::dict record_dict(const IterationRecord& e) {
@@ -115,7 +151,16 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite)
       .def_readwrite("negative_curvature", &SolverOptions::negative_curvature)
       .def_readwrite("lagged_cg_iterations", &SolverOptions::lagged_cg_iterations)
-      .def_readwrite("lagged_cg_forcing", &SolverOptions::lagged_cg_forcing);
+      .def_readwrite("lagged_cg_forcing", &SolverOptions::lagged_cg_forcing)
+      .def(
+          "set_contact",
+          [](SolverOptions& o, const py::object& term) {
+            o.contact = term.is_none() ? PositionTerm() : python_position_term(term);
+          },
+          py::arg("term"),
+          "contact barriers on the positions (FEM): an object with energy(x), gradient(x), hessian(x) "
+          "(scipy.sparse, 3n x 3n), max_step(x0, x1) and check_start(x); None: no contact")
+      .def_property_readonly("has_contact", [](const SolverOptions& o) { return o.contact.active(); });
 
   py::enum_<EmuStep>(m, "EmuStep")
       .value("woodbury", EmuStep::Woodbury)

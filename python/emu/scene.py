@@ -8,6 +8,7 @@ import warnings
 import numpy as np
 
 from .checks import check_anchored, check_mesh, check_movable_bones, integer_ids
+from .contact import ContactSettings
 from .fibers import attachment_fibers, attachments, laplace_fibers
 from .joints import declare_joint, detect_joints
 from .parts import BONE_ACAP_WEIGHT, Part, default_tendon_weight, lame
@@ -43,6 +44,7 @@ class Scene:
         self.gravity = np.zeros(3)
         self.declared_joints = []   # Joint(declared=True) from add_joint
         self.vertex_sets: dict[str, np.ndarray] = {}
+        self.contact: ContactSettings | None = None   # enable_contact
 
     # ----------------------------------------------------------------- parts
     def _tet_ids(self, name, tets) -> np.ndarray:
@@ -235,6 +237,40 @@ class Scene:
         targets.update(zip(ids.tolist(), pos))
         self.pinned = np.array(sorted(targets), dtype=np.int64)
         self.pin_targets = np.array([targets[i] for i in self.pinned]).reshape(-1, 3)
+
+    def enable_contact(self, pairs=None, *, self_contact: bool = False, distance: float | None = None,
+                       stiffness: float | None = None) -> ContactSettings:
+        """Let part surfaces touch without passing through each other (IPC
+        barriers, emu.contact; needs the ipctk package; FEM only so far).
+
+        pairs         [(part, part), ...] that may touch; None: every pair of
+                      different parts except bone with bone
+        self_contact  also each part with itself (a fold); with ``pairs``, name (p, p)
+        distance      the barrier's reach dhat in scene units (None: 5e-3 x the
+                      bounding-box diagonal); surfaces in contact rest a fraction of it apart
+        stiffness     the barrier's stiffness kappa, a pressure in Pa (None: the
+                      softest muscle's shear modulus); contact pressure ~ kappa dhat / gap
+        Scenes without it build nothing for contact. Returns the settings
+        (also ``scene.contact``; ``scene.contact = None`` switches it off).
+        """
+        names = list(self.parts)
+        for pair in pairs or []:
+            if not isinstance(pair, (tuple, list)) or len(pair) != 2:
+                raise ValueError(f"enable_contact: each pair names two parts, got {pair!r}")
+            for name in pair:
+                if name not in self.parts:
+                    raise ValueError(f"enable_contact: no part named '{name}' (parts: {', '.join(names)})")
+            if pair[0] == pair[1] and not self_contact:
+                raise ValueError(f"enable_contact: ({pair[0]!r}, {pair[1]!r}) is self-contact; "
+                                 "pass self_contact=True")
+        for name, v in (("distance", distance), ("stiffness", stiffness)):
+            if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise ValueError(f"enable_contact: {name} must be a positive number, got {v!r}")
+        self.contact = ContactSettings(pairs=None if pairs is None else [tuple(p) for p in pairs],
+                                       self_contact=bool(self_contact),
+                                       distance=None if distance is None else float(distance),
+                                       stiffness=None if stiffness is None else float(stiffness))
+        return self.contact
 
     # ------------------------------------------------------------ model build
     @property

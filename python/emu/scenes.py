@@ -11,7 +11,7 @@ from .meshes import fusiform as fusiform_mesh
 from .meshes import neck as neck_mesh
 from .scene import Scene
 
-__all__ = ["fusiform", "arm", "neck", "chain"]
+__all__ = ["fusiform", "arm", "neck", "chain", "beam_on_bone", "side_by_side"]
 
 
 def fusiform(resolution: int | None = None, *, tets: int | None = None, pins=("proximal",), length: float = 10.0,
@@ -95,4 +95,52 @@ def chain(resolution: int = 1, *, block: float = 1.0) -> Scene:
     s.add_bone("c", labels == 2, fixed=False)
     for i, name in enumerate(("m1", "m2", "m3")):
         s.add_muscle(name, labels == 3 + i, [1.0, 1.0, 0.0])
+    return s
+
+
+def _separate_blocks(blocks: list, resolution: int, block: float) -> tuple:
+    """One mesh of several block meshes that share no vertex: blocks is a list of
+    (name, block coordinates, offset (3,) in block units); returns points, tets
+    and {name: tet ids}."""
+    pts, tets, parts, n, m = [], [], {}, 0, 0
+    for name, cells, offset in blocks:
+        p, t, _ = block_mesh({name: cells}, resolution, block)
+        pts.append(p + np.asarray(offset, float) * block)
+        tets.append(t + n)
+        parts[name] = np.arange(m, m + len(t))
+        n, m = n + len(p), m + len(t)
+    return np.vstack(pts), np.vstack(tets), parts
+
+
+def beam_on_bone(resolution: int = 2, *, length: int = 4, gap: float = 0.2, block: float = 0.01,
+                 muscle_youngs: float = 6e4) -> Scene:
+    """A muscle beam ("muscle", fibres along x) ``gap`` blocks above a fixed bone
+    slab ("bone") of the same length, sharing no vertex with it, pinned at its
+    x = 0 end: under gravity (-z, 100 m/s^2 at the defaults) it sags through the
+    bone unless contact is on (Scene.enable_contact). Blocks of ``block`` metres,
+    6 resolution^3 tets each."""
+    points, tets, parts = _separate_blocks(
+        [("bone", [(i, 0) for i in range(length)], (0, 0, 0)),
+         ("muscle", [(i, 0) for i in range(length)], (0, 0, 1 + gap))], resolution, block)
+    s = Scene(points, tets)
+    s.add_bone("bone", parts["bone"])
+    s.add_muscle("muscle", parts["muscle"], [1.0, 0.0, 0.0], youngs=muscle_youngs)
+    muscle_vertices = np.unique(tets[parts["muscle"]])
+    s.pin(muscle_vertices[np.isclose(points[muscle_vertices, 0], 0.0)])
+    return s
+
+
+def side_by_side(resolution: int = 2, *, length: int = 4, gap: float = 0.1, block: float = 0.01,
+                 muscle_youngs: float = 6e4, max_activation: float = 1e5) -> Scene:
+    """Two muscle bars "left" and "right" (fibres along x, ``length`` blocks long,
+    one block square) ``gap`` blocks apart in y, each pinned at its x = 0 end:
+    fired, they shorten and thicken into each other unless contact is on."""
+    points, tets, parts = _separate_blocks(
+        [("left", [(i, 0) for i in range(length)], (0, 0, 0)),
+         ("right", [(i, 0) for i in range(length)], (0, 1 + gap, 0))], resolution, block)
+    s = Scene(points, tets)
+    for name in ("left", "right"):
+        s.add_muscle(name, parts[name], [1.0, 0.0, 0.0], youngs=muscle_youngs, max_activation=max_activation)
+    x = points[:, 0]
+    s.pin(np.flatnonzero(np.isclose(x, 0.0)))
     return s

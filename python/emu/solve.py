@@ -10,6 +10,7 @@ import numpy as np
 
 from . import _core
 from .checks import inverted_tets
+from .contact import ContactTerm
 from .geometry import bbox_diagonal, vertex_error
 from .lowering import build_model, declared_joint_rows, declared_joint_world
 from .poses import parse_pose
@@ -84,6 +85,10 @@ class Solution:
                 computes, and one more), because EMU's own estimate missed the
                 accuracy and those steps converge; error_estimate is then
                 |x2 - x1|, the last step's length (see Solver's fem_correction)
+    contact     scenes with contact (Scene.enable_contact): {"pairs": point-triangle and
+                edge-edge pairs within the barrier's reach, "min_distance": the smallest
+                gap between surfaces that may touch (inf: none within reach),
+                "intersecting": False (checked)}; None otherwise
     fem_correction  EMU with an error estimate: the FEM Newton correction x1 of
                 emu_positions the estimate measured (estimate = vertex_error(x, x1))
     accuracy_reached  EMU with ``accuracy=``: whether the error estimate ended
@@ -126,6 +131,7 @@ class Solution:
     emu_positions: np.ndarray | None = field(default=None, repr=False)
     corrected: bool = False
     fem_correction: np.ndarray | None = field(default=None, repr=False)
+    contact: dict | None = None      # scenes with contact: active pairs and minimum gap at positions
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
@@ -291,6 +297,17 @@ class Solver:
                 raise ValueError(f"lagged_cg_iterations must be >= 1, got {lagged_cg_iterations}")
             opts.lagged_cg_iterations = int(lagged_cg_iterations)
             self.settings.update(lagged_factor=True, lagged_cg_iterations=int(lagged_cg_iterations))
+        self.contact = None   # the ContactTerm of a scene with contact (scene.enable_contact)
+        if scene.contact is not None:
+            if method != "fem":
+                raise ValueError("this scene has contact (scene.enable_contact), which only method='fem' solves "
+                                 "so far; use method='fem', or scene.contact = None to solve it without")
+            if lagged_factor:
+                raise ValueError("lagged_factor does not handle contact yet (the contact pairs change the "
+                                 "Newton matrix's pattern); leave it off for scenes with contact")
+            self.contact = ContactTerm(scene, scene.contact)
+            opts.set_contact(self.contact)
+            self.settings.update(contact_distance=self.contact.distance, contact_stiffness=self.contact.stiffness)
         if method == "fem":
             self._core = _core.FemSolver(self.model, opts)
         else:
@@ -588,7 +605,15 @@ class Solver:
                         error_estimate_time_s=estimate_s, error_estimate_note=note,
                         phase_times=_phase_times(r),
                         inverted_tets=len(inverted_tets(self.scene.tets, positions)),
-                        emu_positions=positions if self.method == "emu" else None, fem_correction=x1)
+                        emu_positions=positions if self.method == "emu" else None, fem_correction=x1,
+                        contact=self._contact_report(positions))
+
+    def _contact_report(self, positions):
+        if self.contact is None:
+            return None
+        return {"pairs": self.contact.active_pairs(positions),
+                "min_distance": self.contact.minimum_distance(positions),
+                "intersecting": self.contact.intersecting(positions)}
 
     def _fem_correction_of(self, load, positions) -> tuple:
         """(x1 or None, seconds, note): the linearised correction x1 of FEM's

@@ -33,6 +33,9 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   if (!(emu_.alpha > 0) || !std::isfinite(emu_.alpha)) throw std::invalid_argument("alpha must be positive and finite");
   if (emu_.modes < 0) throw std::invalid_argument("the number of modes must be >= 0");
   if (emu_.lbfgs_memory < 1) throw std::invalid_argument("lbfgs_memory must be >= 1");
+  if (options_.contact.active())
+    throw std::invalid_argument("contact is handled by the FEM solver only so far; use method='fem' for scenes "
+                                "with contact");
   if (layout_.num_bones && emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur)
     throw std::invalid_argument("the Schur-complement preconditioner does not handle movable bones; "
                                 "use preconditioner='woodbury'");

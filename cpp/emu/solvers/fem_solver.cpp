@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -111,7 +113,7 @@ void FemSolver::vertex_forces(const Eigen::Vector3d& grav, Eigen::MatrixX3d& f) 
 
 double FemSolver::energy(const LoadCase& load, const Eigen::MatrixX3d& x) const {
   validate_load(model_, load);
-  return energy_with(x, tet_activation(model_, load), load.gravity);
+  return energy_with(x, tet_activation(model_, load), load.gravity) + contact_energy(x);
 }
 
 Eigen::MatrixX3d FemSolver::gradient(const LoadCase& load, const Eigen::MatrixX3d& x) const {
@@ -119,9 +121,66 @@ Eigen::MatrixX3d FemSolver::gradient(const LoadCase& load, const Eigen::MatrixX3
   Eigen::VectorXd g;
   free_gradient(load, x, tet_activation(model_, load), g);
   Eigen::MatrixX3d out = Eigen::MatrixX3d::Zero(x.rows(), 3);
+  const Eigen::MatrixX3d gc = contact_gradient(x);
   for (Eigen::Index v = 0; v < x.rows(); ++v)
-    if (layout_.free_index(v) >= 0) out.row(v) = g.segment<3>(3 * layout_.free_index(v)).transpose();
+    if (layout_.free_index(v) >= 0) out.row(v) = g.segment<3>(3 * layout_.free_index(v)).transpose() + gc.row(v);
   return out;
+}
+
+double FemSolver::contact_energy(const Eigen::MatrixX3d& x) const {
+  return has_contact() ? options_.contact.energy(x) : 0.0;
+}
+
+Eigen::MatrixX3d FemSolver::contact_gradient(const Eigen::MatrixX3d& x) const {
+  if (!has_contact()) return Eigen::MatrixX3d::Zero(x.rows(), 3);
+  Eigen::MatrixX3d g = options_.contact.gradient(x);
+  if (g.rows() != x.rows() || !g.allFinite())
+    throw std::runtime_error("the contact gradient must be finite and #V by 3");
+  return g;
+}
+
+void FemSolver::set_contact_hessian(const Eigen::MatrixX3d& x) {
+  const Eigen::Index n3 = 3 * x.rows();
+  contact_H_ = options_.contact.hessian(x);
+  if (contact_H_.rows() != n3 || contact_H_.cols() != n3)
+    throw std::runtime_error("the contact Hessian must be 3 #V by 3 #V");
+  contact_H_.makeCompressed();
+  // Its free-vertex block in the soft rows, upper triangle (as values_ holds K).
+  std::vector<Eigen::Triplet<double>> upper;
+  for (int j = 0; j < contact_H_.outerSize(); ++j) {
+    const int fj = layout_.free_index(j / 3);
+    if (fj < 0) continue;
+    for (Eigen::SparseMatrix<double>::InnerIterator it(contact_H_, j); it; ++it) {
+      const int fi = layout_.free_index(static_cast<int>(it.row()) / 3);
+      const int ri = 3 * fi + static_cast<int>(it.row()) % 3, rj = 3 * fj + j % 3;
+      if (fi >= 0 && ri <= rj && it.value() != 0.0) upper.emplace_back(ri, rj, it.value());
+    }
+  }
+  contact_soft_.resize(pattern_.rows(), pattern_.rows());
+  contact_soft_.setFromTriplets(upper.begin(), upper.end());
+}
+
+bool FemSolver::factorize_newton_matrix() {
+  use_merged_ = has_contact() && contact_soft_.nonZeros() > 0;
+  if (!use_merged_) return factor_.factorize(values_.data());
+  const int n = pattern_.rows();
+  const Eigen::Map<const Eigen::SparseMatrix<double>> K(n, n, pattern_.nnz(), pattern_.col_ptr().data(),
+                                                        pattern_.row_index().data(), values_.data());
+  Eigen::SparseMatrix<double> A = K + contact_soft_;  // sorted row indices (Eigen merges the columns)
+  A.makeCompressed();
+  const int* cp = A.outerIndexPtr();
+  const int* ri = A.innerIndexPtr();
+  const bool same = merged_factor_ && merged_col_ptr_.size() == size_t(n + 1) &&
+                    std::equal(cp, cp + n + 1, merged_col_ptr_.begin()) &&
+                    merged_row_index_.size() == size_t(A.nonZeros()) &&
+                    std::equal(ri, ri + A.nonZeros(), merged_row_index_.begin());
+  if (!same) {  // the contact pairs changed: a new symbolic analysis
+    merged_factor_ = std::make_unique<CholmodFactor>();
+    merged_factor_->analyze(n, cp, ri);
+    merged_col_ptr_.assign(cp, cp + n + 1);
+    merged_row_index_.assign(ri, ri + A.nonZeros());
+  }
+  return merged_factor_->factorize(A.valuePtr());
 }
 
 double FemSolver::gradient_floor(const Eigen::VectorXd& act) const {
@@ -165,7 +224,12 @@ class FemSolver::Newton {
     }
     poses_ = s_.bones_.begin(load_, x_, initial);
     s_.bones_.place(poses_, x_);
-    E_ = s_.energy_with(x_, act_, load_.gravity) + s_.bones_.spring_energy(poses_);
+    if (s_.has_contact() && s_.options_.contact.check_start) s_.options_.contact.check_start(x_);
+    E_ = s_.energy_with(x_, act_, load_.gravity) + s_.bones_.spring_energy(poses_) + s_.contact_energy(x_);
+    if (!std::isfinite(E_))
+      throw std::invalid_argument(
+          "the start state has a non-finite energy: with contact, surfaces that touch or intersect (move "
+          "the pins or bones in smaller steps between solves, or start from positions without contact)");
     reduced_gradient(x_, poses_, gs_, gb_);
     gn_ = s_.bones_.gradient_norm(gs_.squaredNorm(), gb_);
     g0_ = gn_;
@@ -181,6 +245,10 @@ class FemSolver::Newton {
 
   SearchDirection direction(int /*iteration*/, PhaseTimes& time) {
     SearchDirection dir;
+    if (s_.has_contact()) {
+      ScopedSeconds timer(time.hessian);
+      s_.set_contact_hessian(x_);
+    }
     // Newton with the true Hessian where it is definite (near a stable
     // equilibrium). A failed attempt costs a factorisation, so after one it is
     // retried only once the iteration is in the Newton regime (last step full).
@@ -195,7 +263,7 @@ class FemSolver::Newton {
       s_.assemble_hessian(x_, act_, exact);
       assembled = int(exact);
     };
-    if (s_.options_.lagged_cg_iterations > 0 && s_.lag_.valid) {
+    if (s_.options_.lagged_cg_iterations > 0 && s_.lag_.valid && !s_.has_contact()) {
       // Newton-CG on the lagged factor, to the forcing term of EMU's CG
       // (Eisenstat-Walker); a factorisation only when that does not converge.
       assemble(try_exact);
@@ -205,7 +273,7 @@ class FemSolver::Newton {
         if (!try_exact) ++dir.filtered;
         last_neutral_.clear();
         dir.slope = slope();
-        return dir;
+        return dir;  // (no contact here: no collision cap needed)
       }
     }
     bool have = false;
@@ -231,7 +299,8 @@ class FemSolver::Newton {
               "anchors (no pin, fixed bone or joint holds it), or collapsed tets (see scene.mesh_report and "
               "Solution.inverted_tets)");
       }
-      if (try_exact && s_.options_.negative_curvature && !nd_ && -slope() <= kSaddleDecrease * (E0_ - E_)) {
+      if (try_exact && s_.options_.negative_curvature && !nd_ && !s_.has_contact() &&
+          -slope() <= kSaddleDecrease * (E0_ - E_)) {
         ScopedSeconds timer(time.linear_solve);
         dir.negative_curvature = add_negative_curvature();
       }
@@ -239,15 +308,40 @@ class FemSolver::Newton {
     last_neutral_ = have ? std::vector<NeutralMode>() : neutral_;
     neutral_.clear();
     dir.factorizations = s_.factorizations_ - factorizations0;
+    if (s_.has_contact() && !cap_at_collision()) {
+      ScopedSeconds timer(time.line_search);
+      return dir.fail("contact: continuous collision detection allows no step along the Newton direction "
+                      "(surfaces touching; a larger contact distance may help)");
+    }
     dir.slope = slope();
     if (!(dir.slope < 0)) return dir.fail("Newton direction is not a descent direction");
     return dir;
   }
 
+  /// Contact: shortens the step to the largest one along which no surfaces
+  /// pass through each other (CCD on the straight path of the positions;
+  /// movable bones turn, so trial_energy checks each of their trial states
+  /// too). False if no step is possible.
+  bool cap_at_collision() {
+    Eigen::MatrixX3d x1;
+    BonePoses poses1;
+    step_positions(1.0, x1, poses1);
+    const double s = s_.options_.contact.max_step(x_, x1);
+    if (!(s > 0)) return false;
+    if (s < 1) {
+      ds_ *= s;
+      if (nd_) db_ *= s;
+    }
+    return true;
+  }
+
   double trial_energy(double s) {
     trial_ = x_;
     step_positions(s, trial_, trial_poses_);
-    return s_.energy_with(trial_, act_, load_.gravity) + s_.bones_.spring_energy(nd_ ? trial_poses_ : poses_);
+    if (s_.has_contact() && nd_ && s_.options_.contact.max_step(x_, trial_) < 1.0)
+      return std::numeric_limits<double>::infinity();  // the straight path to it crosses a surface
+    return s_.energy_with(trial_, act_, load_.gravity) + s_.bones_.spring_energy(nd_ ? trial_poses_ : poses_) +
+           s_.contact_energy(trial_);
   }
 
   /// The positions of the last trial_energy call.
@@ -272,6 +366,7 @@ class FemSolver::Newton {
   /// the bone border and Schur solve see it; see reduced_system.
   void border(bool exact, Eigen::MatrixXd& Hsb, Eigen::MatrixXd& Hbb) {
     s_.bones_.assemble_border(poses_, s_.element_, x_, fv_, exact, Hsb, Hbb);
+    if (s_.has_contact()) s_.bones_.add_vertex_hessian(poses_, x_, s_.contact_H_, Hsb, Hbb);
   }
 
   /// Positions and poses after the step s (ds, db) from the current iterate.
@@ -291,10 +386,12 @@ class FemSolver::Newton {
   /// definite (a bone turn is resisted only by that curvature), else filtered
   /// throughout.
   bool correction_direction(bool exact) {
+    if (s_.has_contact()) s_.set_contact_hessian(x_);
     s_.assemble_hessian(x_, act_, exact);
     last_exact_ = exact;
     int cg = 0;  // with a lagged factor, PCG first (SolverOptions::lagged_cg_iterations)
-    if (s_.options_.lagged_cg_iterations > 0 && lagged_direction(true, kCorrectionResidual * gn_, cg) &&
+    if (s_.options_.lagged_cg_iterations > 0 && !s_.has_contact() &&
+        lagged_direction(true, kCorrectionResidual * gn_, cg) &&
         slope() < 0)
       return true;
     if (newton_direction(true) && slope() < 0) return true;
@@ -316,8 +413,18 @@ class FemSolver::Newton {
 
   void reduced_gradient(const Eigen::MatrixX3d& x, const BonePoses& poses, Eigen::VectorXd& gs, Eigen::VectorXd& gb) {
     s_.free_gradient(load_, x, act_, gs);
+    Eigen::MatrixX3d gc;
+    if (s_.has_contact()) {
+      gc = s_.contact_gradient(x);
+      const UnknownLayout& L = s_.layout_;
+      for (Eigen::Index v = 0; v < x.rows(); ++v)
+        if (L.free_index(v) >= 0) gs.segment<3>(3 * L.free_index(v)) += gc.row(v).transpose();
+    }
     if (!nd_) return;
     s_.vertex_forces(load_.gravity, fv_);
+    if (s_.has_contact())
+      for (Eigen::Index v = 0; v < x.rows(); ++v)
+        if (s_.layout_.vertex_bone(v) >= 0) fv_.row(v) += gc.row(v);
     s_.bones_.gradient(poses, x, fv_, gb);
   }
 
@@ -326,17 +433,18 @@ class FemSolver::Newton {
   bool newton_direction(bool exact) {
     ++s_.factorizations_;
     s_.lag_.valid = false;  // the factor is being replaced
-    if (!s_.factor_.factorize(s_.values_.data())) return false;
+    if (!s_.factorize_newton_matrix()) return false;
+    const CholmodFactor& factor = s_.newton_factor();
     y_.resize(gs_.size());
-    s_.factor_.solve(gs_.data(), y_.data(), 1);
+    factor.solve(gs_.data(), y_.data(), 1);
     if (!nd_) {
       ds_ = -y_;
-      s_.lag_.valid = true;
+      s_.lag_.valid = !s_.use_merged_;
       return true;
     }
     border(exact, Hsb_, Hbb_);
     Wsb_.resize(Hsb_.rows(), nd_);
-    s_.factor_.solve(Hsb_.data(), Wsb_.data(), nd_);
+    factor.solve(Hsb_.data(), Wsb_.data(), nd_);
     Eigen::MatrixXd S = Hbb_ - Hsb_.transpose() * Wsb_;
     S = 0.5 * (S + S.transpose()).eval();
     const Eigen::VectorXd rb = -gb_ + Hsb_.transpose() * y_;
@@ -350,7 +458,7 @@ class FemSolver::Newton {
   // singular bone Schur complement (a neutral mode) leaves no preconditioner.
   void keep_bone_border(const Eigen::MatrixXd& S) {
     Eigen::LLT<Eigen::MatrixXd> llt(S);
-    if (llt.info() != Eigen::Success || !neutral_.empty()) return;
+    if (llt.info() != Eigen::Success || !neutral_.empty() || s_.use_merged_) return;
     s_.lag_.Hsb = Hsb_;
     s_.lag_.Wsb = Wsb_;
     s_.lag_.S_inv = llt.solve(Eigen::MatrixXd::Identity(nd_, nd_));
@@ -540,6 +648,14 @@ void FemSolver::reduced_system(const LoadCase& load, const Eigen::MatrixX3d& x0,
   const auto& ri = pattern_.row_index();
   for (int j = 0; j < pattern_.rows(); ++j)
     for (int k = cp[j]; k < cp[j + 1]; ++k) hessian(ri[k], j) = hessian(j, ri[k]) = values_[k];
+  if (has_contact()) {
+    set_contact_hessian(newton.positions());
+    for (int j = 0; j < contact_soft_.outerSize(); ++j)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(contact_soft_, j); it; ++it) {
+        hessian(it.row(), j) += it.value();
+        if (it.row() != j) hessian(j, it.row()) += it.value();
+      }
+  }
   if (!nd) return;
   Eigen::MatrixXd Hsb, Hbb;
   newton.border(exact, Hsb, Hbb);

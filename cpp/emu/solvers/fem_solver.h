@@ -8,6 +8,8 @@
 // (one factorisation of the soft block, one back-substitution per bone unknown
 // and a small dense Schur complement per iteration).
 #include <memory>
+
+#include <Eigen/SparseCore>
 #include <string>
 #include <utility>
 #include <vector>
@@ -84,6 +86,20 @@ class FemSolver {
   /// The round-off level of the gradient norm (see Convergence).
   double gradient_floor(const Eigen::VectorXd& act) const;
 
+  // Contact (SolverOptions::contact): its energy and gradient at x (0 / zero
+  // rows without contact) and the Newton matrix with its Hessian.
+  bool has_contact() const { return options_.contact.active(); }
+  double contact_energy(const Eigen::MatrixX3d& x) const;
+  Eigen::MatrixX3d contact_gradient(const Eigen::MatrixX3d& x) const;
+  /// contact_H_ = the contact Hessian at x, and contact_soft_ its free-vertex
+  /// block in the soft rows (upper triangle).
+  void set_contact_hessian(const Eigen::MatrixX3d& x);
+  /// Factorises the soft block values_ (+ contact_soft_ where it has entries, on
+  /// the merged pattern, analysed again when that changes); false if it is not
+  /// positive definite. newton_factor() is the factor it used.
+  bool factorize_newton_matrix();
+  const CholmodFactor& newton_factor() const { return use_merged_ ? *merged_factor_ : factor_; }
+
   Model model_;
   UnknownLayout layout_;
   SolverOptions options_;
@@ -101,6 +117,10 @@ class FemSolver {
     Eigen::MatrixXd Hsb, Wsb, S_inv;
   };
   LaggedFactor lag_;
+  Eigen::SparseMatrix<double> contact_H_, contact_soft_;
+  std::unique_ptr<CholmodFactor> merged_factor_;  // soft block + contact, on the merged pattern
+  std::vector<int> merged_col_ptr_, merged_row_index_;  // the pattern merged_factor_ analysed
+  bool use_merged_ = false;
   int factorizations_ = 0;  // numeric factorisations of the Newton matrix so far
   double setup_seconds_ = 0;
 };

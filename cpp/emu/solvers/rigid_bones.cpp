@@ -99,6 +99,31 @@ BonePoses RigidBones::begin(const LoadCase& load, const Eigen::MatrixX3d& x, con
   return poses;
 }
 
+void RigidBones::add_vertex_hessian(const BonePoses& poses, const Eigen::MatrixX3d& x,
+                                    const Eigen::SparseMatrix<double>& H, Eigen::MatrixXd& Hsb,
+                                    Eigen::MatrixXd& Hbb) const {
+  // Column dof j = 3 w + c of a bone vertex w: its position moves by J_w db, so
+  // entry H(i, j) adds H(i, j) J_w.row(c) to row i's border (a free vertex) or,
+  // through J_u.row(r)', to Hbb (a bone vertex u).
+  for (int j = 0; j < H.outerSize(); ++j) {
+    const int w = j / 3, c = j % 3, bw = layout_.vertex_bone(w);
+    if (bw < 0 || layout_.free_index(w) >= 0) continue;
+    const Bone& Bw = bones_[bw];
+    const Eigen::RowVectorXd Jw = jacobian(Bw, x.row(w).transpose() - poses[bw].p).row(c);
+    for (Eigen::SparseMatrix<double>::InnerIterator it(H, j); it; ++it) {
+      const int i = static_cast<int>(it.row()), u = i / 3, r = i % 3;
+      if (layout_.free_index(u) >= 0) {
+        Hsb.block(3 * layout_.free_index(u) + r, Bw.offset, 1, Bw.dofs) += it.value() * Jw;
+      } else if (layout_.vertex_bone(u) >= 0) {
+        const int bu = layout_.vertex_bone(u);
+        const Bone& Bu = bones_[bu];
+        const Eigen::VectorXd Ju = jacobian(Bu, x.row(u).transpose() - poses[bu].p).row(r).transpose();
+        Hbb.block(Bu.offset, Bw.offset, Bu.dofs, Bw.dofs) += it.value() * Ju * Jw;
+      }
+    }
+  }
+}
+
 Eigen::Matrix<double, 3, Eigen::Dynamic> RigidBones::jacobian(const Bone& B, const Vec3& r) const {
   // d/dw of exp([w]_x) r = w x r = -[r]_x w; a translation moves every vertex.
   Eigen::Matrix<double, 3, Eigen::Dynamic> J(3, B.dofs);

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/SparseCore>
 
 #include "emu/energy/types.h"
 #include "emu/model/unknown_layout.h"
@@ -68,6 +69,12 @@ class RigidBones {
   /// with vertex forces f. exact = false clamps the rotation term to PSD.
   void assemble_border(const BonePoses& poses, const std::vector<double>& element, const Eigen::MatrixX3d& x,
                        const Eigen::MatrixX3d& f, bool exact, Eigen::MatrixXd& Hsb, Eigen::MatrixXd& Hbb) const;
+
+  /// Adds to the border the part of a position Hessian H (3 #V by 3 #V, both
+  /// triangles, dof 3 v + i; a contact term's) that couples bone vertices:
+  /// Hsb += H_sb J, Hbb += J' H_bb J at positions x.
+  void add_vertex_hessian(const BonePoses& poses, const Eigen::MatrixX3d& x, const Eigen::SparseMatrix<double>& H,
+                          Eigen::MatrixXd& Hsb, Eigen::MatrixXd& Hbb) const;
 
   /// Solves S db = rb for the bone Schur complement S. Exact: false unless S is
   /// positive definite. Filtered: where S is singular (a turn nothing resists)

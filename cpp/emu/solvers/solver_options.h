@@ -4,6 +4,8 @@
 
 #include <Eigen/Core>
 
+#include "emu/contact/position_term.h"
+
 namespace emu {
 
 struct IterationRecord;
@@ -46,6 +48,10 @@ struct SolverOptions {
   // every accepted iterate; returning true stops the solve with status
   // "stopped by on_iteration" (error-against-time curves, custom stopping).
   std::function<bool(const IterationRecord&, const Eigen::MatrixX3d&)> on_iteration;
+  // FEM: contact barriers on the positions (none when inactive): added to the
+  // energy, gradient and Newton matrix; every step capped by continuous
+  // collision detection (contact/position_term.h).
+  PositionTerm contact;
 };
 
 // EMU's step: the paper's Woodbury quasi-Newton step, Newton-Krylov (PCG on

@@ -1,0 +1,196 @@
+"""Contact (emu.contact, Scene.enable_contact): IPC barriers from ipctk in the
+FEM solver. Each physical test has its twin without contact, which must
+interpenetrate (so the test can fail); the derivatives are checked by
+finite differences, in Python and through the C++ Newton system."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import emu
+from emu.contact import ContactSettings, ContactTerm, boundary_faces
+
+ipctk = pytest.importorskip("ipctk", reason="contact needs ipctk (pip install emu[contact])")
+
+GRAVITY = np.array([0.0, 0.0, -100.0])
+
+
+def muscle_vertices(scene, name):
+    return np.unique(scene.tets[scene.parts[name].tets])
+
+
+def test_boundary_faces_of_a_cube_are_outward_and_closed():
+    points, tets, _ = emu.meshes.block_mesh({"a": [(0, 0)]}, 2)
+    faces, face_tet = boundary_faces(tets)
+    assert len(faces) == 6 * 2 * 2 * 2          # 2 x 2 squares of 2 triangles per side
+    p = points[faces]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    outward = ((p.mean(axis=1) - points.mean(axis=0)) * n).sum(axis=1)
+    assert np.all(outward > 0)
+    # closed: the divergence theorem gives the volume
+    volume = (p.mean(axis=1) * n).sum() / 6.0
+    assert volume == pytest.approx(1.0)
+    assert np.all(np.isin(face_tet, np.arange(len(tets))))
+
+
+def test_beam_stops_on_the_bone_and_passes_through_without_contact():
+    scene = emu.scenes.beam_on_bone()
+    muscle = muscle_vertices(scene, "muscle")
+    bone_top = scene.points[muscle_vertices(scene, "bone"), 2].max()
+    free = emu.solve(scene, method="fem", gravity=GRAVITY)
+    assert free.converged and free.contact is None
+    assert free.positions[muscle, 2].min() < bone_top - 0.3 * 0.01       # sags well into the bone
+    settings = scene.enable_contact()
+    checker = ContactTerm(scene, settings)
+    assert checker.intersecting(free.positions)                           # the check sees it
+    sol = emu.solve(scene, method="fem", gravity=GRAVITY)
+    assert sol.converged, sol.status
+    z = sol.positions[muscle, 2]
+    assert z.min() > bone_top                                             # no muscle vertex inside the bone
+    dhat = checker.distance
+    assert sol.contact["intersecting"] is False and sol.contact["pairs"] > 0
+    assert 0 < sol.contact["min_distance"] < dhat                         # resting within the barrier's reach
+    assert sol.contact["min_distance"] == pytest.approx(z.min() - bone_top, rel=1e-6)
+    assert not checker.intersecting(sol.positions)
+
+
+def test_side_by_side_muscles_do_not_interpenetrate():
+    scene = emu.scenes.side_by_side()
+    checker = ContactTerm(scene, ContactSettings())
+    act = {"left": 1.0, "right": 1.0}
+    free = emu.solve(scene, act, method="fem", normalized=True)
+    assert free.converged and checker.intersecting(free.positions)
+    scene.enable_contact([("left", "right")])
+    sol = emu.solve(scene, act, method="fem", normalized=True)
+    assert sol.converged, sol.status
+    assert not checker.intersecting(sol.positions)
+    assert 0 < sol.contact["min_distance"] < checker.distance
+
+
+def test_sequence_never_intersects():
+    scene = emu.scenes.side_by_side()
+    scene.enable_contact()
+    solver = emu.Solver(scene, "fem")
+    prev = None
+    for a in np.linspace(0.1, 1.0, 6).tolist() + [0.5, 0.0]:
+        prev = solver.solve({"left": a, "right": 0.6 * a}, normalized=True, initial=prev)
+        assert prev.converged, (a, prev.status)
+        assert not solver.contact.intersecting(prev.positions)
+        assert prev.contact["min_distance"] > 0
+
+
+def _active_state(scene):
+    """Positions of the beam pressed onto the bone (pairs within reach)."""
+    scene.enable_contact()
+    return emu.solve(scene, method="fem", gravity=GRAVITY).positions
+
+
+def test_contact_gradient_and_hessian_match_finite_differences():
+    scene = emu.scenes.beam_on_bone()
+    x = _active_state(scene)
+    term = ContactTerm(scene, scene.contact)
+    term.project = ipctk.PSDProjectionMethod.NONE
+    assert term.active_pairs(x) > 0
+    rng = np.random.default_rng(3)
+    moving = muscle_vertices(scene, "muscle")
+    d = np.zeros_like(x)
+    d[moving] = rng.standard_normal((len(moving), 3))
+    d *= 1e-3 * term.distance / np.abs(d).max()     # stays within the barrier's smooth range
+    h = 1.0
+    g = term.gradient(x)
+    fd = (term.energy(x + h * d) - term.energy(x - h * d)) / (2 * h)
+    assert fd == pytest.approx((g * d).sum(), rel=1e-5)
+    H = term.hessian(x)
+    Hd = (H @ d.ravel()).reshape(-1, 3)
+    fd_g = (term.gradient(x + h * d) - term.gradient(x - h * d)) / (2 * h)
+    assert np.abs(fd_g - Hd).max() <= 1e-5 * np.abs(Hd).max()
+    # the projected Hessian is PSD
+    term.project = ipctk.PSDProjectionMethod.CLAMP
+    Hp = term.hessian(x).toarray()
+    assert np.linalg.eigvalsh(0.5 * (Hp + Hp.T)).min() >= -1e-9 * np.abs(Hp).max()
+
+
+@pytest.mark.parametrize("scene_name", ["beam", "arm"])
+def test_fem_newton_system_includes_contact(scene_name):
+    """The C++ reduced system (free vertices, bone turns) against finite
+    differences of its reduced energy, contact on and active: the gradient and
+    the Hessian (contact projection off, so the Hessian is exact)."""
+    if scene_name == "beam":
+        scene = emu.scenes.beam_on_bone()
+        x = _active_state(scene)
+        act = None
+    else:
+        # a reach beyond the rest gap (one mesh edge from the attachments): pairs
+        # on the forearm's vertices, whose rows are its hinge turn
+        scene = emu.scenes.arm(2)
+        scene.enable_contact(distance=0.008)
+        act = {"flexor": 0.4}
+        with pytest.warns(emu.contact.ContactWarning, match="exceeds the smallest rest gap"):
+            solver = emu.Solver(scene, "fem")
+        x = solver.solve(act, normalized=True).positions
+        forearm = muscle_vertices(scene, "forearm")
+        assert np.abs(solver.contact.gradient(x)[forearm]).max() > 0
+    if scene_name == "beam":
+        solver = emu.Solver(scene, "fem")
+    solver.contact.project = ipctk.PSDProjectionMethod.NONE
+    assert solver.contact.active_pairs(x) > 0
+    load = solver.load_case(act, normalized=True, gravity=GRAVITY if scene_name == "beam" else None)
+    core = solver._core
+    g, H = core.reduced_system(load, x, True)
+    n = len(g)
+    rng = np.random.default_rng(1)
+    d = rng.standard_normal(n)
+    d *= 1e-4 * solver.contact.distance / np.abs(d).max()
+    E = lambda z: core.reduced_energy(load, x, z)  # noqa: E731
+    fd = (E(d) - E(-d)) / 2
+    assert fd == pytest.approx(g @ d, rel=1e-4)
+    # curvature along d: E(d) + E(-d) - 2 E(0) = d' H d
+    curv = E(d) + E(-d) - 2 * E(np.zeros(n))
+    assert curv == pytest.approx(d @ H @ d, rel=1e-3)
+
+
+def test_default_distance_stays_below_the_rest_gap():
+    wide = emu.scenes.beam_on_bone()               # 2 mm gap: the default reach (5e-3 diagonal) fits
+    wide.enable_contact()
+    term = ContactTerm(wide, wide.contact)
+    assert term.distance == pytest.approx(emu.contact.DEFAULT_DISTANCE * emu.bbox_diagonal(wide.points))
+    assert term.rest_gap == np.inf                 # nothing within reach at rest
+    narrow = emu.scenes.beam_on_bone(gap=0.02)     # 0.2 mm, below that reach
+    narrow.enable_contact()
+    term = ContactTerm(narrow, narrow.contact)
+    assert term.rest_gap == pytest.approx(0.02 * 0.01, rel=1e-6)
+    assert term.distance == pytest.approx(0.5 * term.rest_gap)
+    assert term.active_pairs(narrow.points) == 0   # nothing pushes at rest
+
+
+def test_contact_refusals_name_the_fix():
+    scene = emu.scenes.beam_on_bone()
+    with pytest.raises(ValueError, match="no part named 'femur'"):
+        scene.enable_contact([("muscle", "femur")])
+    with pytest.raises(ValueError, match="self_contact=True"):
+        scene.enable_contact([("muscle", "muscle")])
+    with pytest.raises(ValueError, match="distance must be a positive"):
+        scene.enable_contact(distance=-1.0)
+    scene.enable_contact()
+    with pytest.raises(ValueError, match="method='fem'"):
+        emu.Solver(scene, "emu")
+    with pytest.raises(ValueError, match="lagged_factor"):
+        emu.Solver(scene, "fem", lagged_factor=True)
+    # a start state with surfaces through each other
+    solver = emu.Solver(scene, "fem")
+    x = scene.points.copy()
+    x[muscle_vertices(scene, "muscle"), 2] -= 0.006
+    with pytest.raises(ValueError, match="pass through each other at the start"):
+        solver.solve(initial=x)
+    scene.contact = None
+    assert emu.Solver(scene, "emu").contact is None
+
+
+def test_a_scene_without_contact_builds_nothing_for_it():
+    code = ("import sys, emu; s = emu.scenes.beam_on_bone(); sol = emu.solve(s, method='fem'); "
+            "print('ipctk' in sys.modules, sol.contact, emu.Solver(s, 'fem').contact)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["False", "None", "None"]
