@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import emu
-from emu.contact import ContactSettings, ContactTerm, boundary_faces
+from emu.contact import ContactSettings, ContactTerm
+from emu.geometry import boundary_faces
 
 ipctk = pytest.importorskip("ipctk", reason="contact needs ipctk (pip install emu[contact])")
 
@@ -24,7 +25,7 @@ def muscle_vertices(scene, name):
 
 def test_boundary_faces_of_a_cube_are_outward_and_closed():
     points, tets, _ = emu.meshes.block_mesh({"a": [(0, 0)]}, 2)
-    faces, face_tet = boundary_faces(tets)
+    faces, face_tet = boundary_faces(tets, return_tets=True)
     assert len(faces) == 6 * 2 * 2 * 2          # 2 x 2 squares of 2 triangles per side
     p = points[faces]
     n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
@@ -194,3 +195,50 @@ def test_a_scene_without_contact_builds_nothing_for_it():
             "print('ipctk' in sys.modules, sol.contact, emu.Solver(s, 'fem').contact)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert out == ["False", "None", "None"]
+
+
+def test_pair_filters_allow_exactly_the_pairs_named():
+    from emu.contact import _patches
+    allowed = np.array([[0, 1, 1, 1], [1, 0, 1, 1], [1, 1, 0, 0], [1, 1, 0, 0]], bool)  # two bones last
+    patch = _patches(allowed, np.arange(4))
+    assert patch is not None and patch[2] == patch[3] and len({patch[0], patch[1], patch[2]}) == 3
+    chain = np.array([[0, 0, 1], [0, 0, 0], [1, 0, 0]], bool)     # a-c only: no patch labelling
+    assert _patches(chain, np.arange(3)) is None
+
+
+@pytest.mark.parametrize("pairs", [None, [("extensor", "humerus"), ("extensor", "forearm"), ("flexor", "extensor")],
+                                   [("extensor", "humerus"), ("flexor", "forearm")]])
+def test_elbow_wrap_extensor_slides_over_the_bones(pairs):
+    """The extensor stretched across the elbow as the flexor bends it far: it
+    cuts through the bones without contact, not with it; the last pair list
+    needs the Python filter (ipctk on one thread)."""
+    scene = emu.scenes.elbow_wrap(2, max_activation=2e6)
+    bones = ContactTerm(scene, ContactSettings(pairs=[("extensor", "humerus"), ("extensor", "forearm")]))
+    free = emu.solve(scene, {"flexor": 1.0}, method="fem", normalized=True)
+    assert free.converged and bones.intersecting(free.positions)
+    scene.enable_contact(pairs)
+    solver = emu.Solver(scene, "fem")
+    assert solver.contact._python_filter == (pairs is not None and len(pairs) == 2)
+    prev = None
+    for a in np.linspace(0.1, 1.0, 4):
+        prev = solver.solve({"flexor": a}, normalized=True, initial=prev)
+        assert prev.converged, prev.status
+        assert not solver.contact.intersecting(prev.positions)
+    if pairs is None or len(pairs) == 3:
+        assert not bones.intersecting(prev.positions)
+    else:   # forearm not named: the extensor passes through it
+        assert prev.contact["pairs"] > 0
+    angle = emu.bones.bone_angle(scene, prev.positions, "forearm")
+    assert angle > 45.0   # bent far
+
+
+def test_scene_file_contact_table(tmp_path):
+    from emu.app.scenefile import SceneFileError, load_scene_file
+    f = tmp_path / "s.toml"
+    f.write_text('[mesh.arm]\nresolution = 2\n[contact]\npairs = [["flexor", "humerus"]]\ndistance = 0.001\n'
+                 '[solver]\nmethod = "fem"\n')
+    spec = load_scene_file(f)
+    assert spec.scene.contact.pairs == [("flexor", "humerus")] and spec.scene.contact.distance == 0.001
+    f.write_text('[mesh.arm]\nresolution = 2\n[contact]\npairs = [["flexor", "femur"]]\n')
+    with pytest.raises(SceneFileError, match="contact: enable_contact: no part named 'femur'"):
+        load_scene_file(f)

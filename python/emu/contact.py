@@ -24,9 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import bbox_diagonal
+from .geometry import bbox_diagonal, boundary_faces
 
-__all__ = ["ContactSettings", "ContactTerm", "ContactWarning", "boundary_faces", "DEFAULT_DISTANCE",
+__all__ = ["ContactSettings", "ContactTerm", "ContactWarning", "DEFAULT_DISTANCE",
            "contact_available"]
 
 # The barrier's reach (dhat) relative to the bounding-box diagonal by default
@@ -78,21 +78,6 @@ class ContactSettings:
     stiffness: float | None = None
 
 
-def boundary_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Faces of the mesh's boundary, oriented outward, and the tet each belongs to.
-
-    tets  (m, 4) positively oriented tets
-    Returns faces (f, 3) vertex ids and face_tet (f,) tet ids.
-    """
-    # faces opposite vertex 0..3 of a positively oriented tet, outward
-    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-    f = tets[:, local].reshape(-1, 3)
-    key = np.sort(f, axis=1)
-    _, inv, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    once = count[inv.ravel()] == 1
-    return f[once].astype(np.int32), (np.flatnonzero(once) // 4).astype(np.int64)
-
-
 class ContactTerm:
     """The contact energy of a scene, for the solver (C++ calls energy,
     gradient, hessian and max_step with #V by 3 positions).
@@ -109,7 +94,8 @@ class ContactTerm:
         names = list(scene.parts)
         pairs = _allowed_pairs(scene, settings)
         kinds = {n: scene.parts[n].kind for n in names}
-        faces, face_tet = boundary_faces(scene.tets)
+        faces, face_tet = boundary_faces(scene.tets, return_tets=True)
+        faces = faces.astype(np.int32)
         owner = np.full(len(scene.tets), -1, np.int64)
         for i, p in enumerate(scene.parts.values()):
             owner[p.tets] = i
@@ -150,18 +136,19 @@ class ContactTerm:
         for a, b in pairs:
             allowed[names.index(a), names.index(b)] = allowed[names.index(b), names.index(a)] = True
         present = np.unique(self.vertex_part)
-        table = allowed[np.ix_(present, present)]
+        patch = _patches(allowed, present)
         self._python_filter = False
-        if table.all():
-            pass   # every pair may touch: no filter
-        elif np.array_equal(table, ~np.eye(len(present), dtype=bool)):
-            self.mesh.can_collide = ipctk.make_vertex_patches_filter(self.vertex_part.astype(np.int32))
-        else:
+        if allowed[np.ix_(present, present)].all():
+            pass   # every pair, self-contact included: no filter
+        elif patch is None:
             # a Python filter: ipctk must then run on this thread (its worker
             # threads calling back into Python would wait for the GIL held here)
             vp = self.vertex_part
             self.mesh.can_collide = ipctk.CollisionFilter(lambda i, j: bool(allowed[vp[i], vp[j]]))
             self._python_filter = True
+        else:
+            # pairs may touch exactly when their patches differ: ipctk's own filter
+            self.mesh.can_collide = ipctk.make_vertex_patches_filter(patch[self.vertex_part].astype(np.int32))
         self.pairs = pairs
         self.kinds = kinds
         gap = self._rest_gap(scene.points, self.distance)
@@ -271,6 +258,24 @@ class ContactTerm:
         with self._broad_phase():
             return float(self._ipctk.compute_collision_free_stepsize(
                 self.mesh, self.surface_positions(x0), self.surface_positions(x1)))
+
+
+def _patches(allowed: np.ndarray, present: np.ndarray):
+    """Patch ids per part such that two parts may touch exactly when their
+    patches differ (parts that may not touch merged into one patch), or None
+    where no such ids exist (a part pair list that is not of that form, or
+    self-contact)."""
+    n = len(allowed)
+    patch = np.arange(n)
+    for p in present:
+        for q in present:
+            if p != q and not allowed[p, q]:
+                patch[patch == patch[q]] = patch[p]
+    for p in present:
+        for q in present:
+            if allowed[p, q] != (patch[p] != patch[q]):
+                return None
+    return patch
 
 
 def _allowed_pairs(scene, settings: ContactSettings) -> list:

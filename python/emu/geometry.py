@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["error_history", "time_to_error", "time_within", "bbox_diagonal", "vertex_error", "deformation_gradients"]
+__all__ = ["error_history", "time_to_error", "time_within", "bbox_diagonal", "vertex_error", "deformation_gradients",
+           "boundary_faces"]
 
 
 def bbox_diagonal(points) -> float:
@@ -64,3 +65,19 @@ def deformation_gradients(rest: np.ndarray, tets: np.ndarray, x: np.ndarray) -> 
         q = p[tets]
         return np.stack([q[:, 1] - q[:, 0], q[:, 2] - q[:, 0], q[:, 3] - q[:, 0]], axis=2)
     return edges(x) @ np.linalg.inv(edges(rest))
+
+
+# outward faces of a positively oriented tet (a, b, c, d)
+_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+
+
+def boundary_faces(tets: np.ndarray, return_tets: bool = False):
+    """Triangles of tets (m, 4) that belong to exactly one tet, outward-oriented:
+    (f, 3) vertex ids (and, with return_tets, the tet of each: (f,))."""
+    faces = tets[:, _FACES].reshape(-1, 3)
+    key = np.sort(faces, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    on = counts[inverse.ravel()] == 1
+    if return_tets:
+        return faces[on], np.repeat(np.arange(len(tets)), 4)[on]
+    return faces[on]

@@ -11,7 +11,7 @@ from .meshes import fusiform as fusiform_mesh
 from .meshes import neck as neck_mesh
 from .scene import Scene
 
-__all__ = ["fusiform", "arm", "neck", "chain", "beam_on_bone", "side_by_side"]
+__all__ = ["fusiform", "arm", "neck", "chain", "beam_on_bone", "side_by_side", "elbow_wrap"]
 
 
 def fusiform(resolution: int | None = None, *, tets: int | None = None, pins=("proximal",), length: float = 10.0,
@@ -143,4 +143,37 @@ def side_by_side(resolution: int = 2, *, length: int = 4, gap: float = 0.1, bloc
         s.add_muscle(name, parts[name], [1.0, 0.0, 0.0], youngs=muscle_youngs, max_activation=max_activation)
     x = points[:, 0]
     s.pin(np.flatnonzero(np.isclose(x, 0.0)))
+    return s
+
+
+def elbow_wrap(resolution: int = 2, *, length: int = 6, block: float = 0.02, muscle_youngs: float = 6e4,
+               max_activation: float = 3e5) -> Scene:
+    """The arm's two bones on their hinged elbow (emu.meshes.arm's layout: the
+    humerus up +y, fixed; the forearm along +x, on the hinge about z through
+    the origin), a flexor in the angle between them, and an extensor that runs
+    behind the elbow one block clear of both bones, attached only at its two
+    ends (to the humerus's back near its top, to the forearm's underside). As
+    the flexor bends the elbow far, the extensor is stretched across the
+    elbow's corner: with contact on it slides over the bone ends, without it
+    cuts through them. 6 resolution^3 tets per block."""
+    n = int(length)
+    if n < 4:
+        raise ValueError(f"length must be >= 4 blocks, got {length}")
+    reach = n // 2 + 1
+    blocks = {
+        "humerus": [(-1, j) for j in range(n)],
+        "forearm": [(i, -1) for i in range(n)],
+        "flexor": [(i, j) for i in range(n) for j in range(n) if 3 <= i + j <= 5],
+        # one block clear of the bones: a column at x in [-3, -2], a row at y in [-3, -2],
+        # joined at the corner; tabs across the gap at the ends are its attachments
+        "extensor": ([(-3, j) for j in range(-3, n)] + [(i, -3) for i in range(-2, reach)]
+                     + [(-2, n - 1), (reach - 1, -2)]),
+    }
+    points, tets, labels = block_mesh(blocks, resolution, size=block)
+    s = Scene(points, tets)
+    s.add_bone("humerus", labels == 0)
+    s.add_bone("forearm", labels == 1, fixed=False)
+    for i, name in ((2, "flexor"), (3, "extensor")):
+        s.add_muscle(name, labels == i, youngs=muscle_youngs, max_activation=max_activation)
+    s.resolve_fibers()
     return s

@@ -58,7 +58,7 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                                   "error_estimate": sol.error_estimate,
                                   "error_estimate_s": sol.error_estimate_time_s,
                                   "accuracy_reached": sol.accuracy_reached, "fem_corrected": sol.corrected,
-                                  "inverted_tets": sol.inverted_tets})
+                                  "inverted_tets": sol.inverted_tets, "contact": sol.contact})
             if on_frame is not None:
                 on_frame(k, sol)
             elapsed = time.perf_counter() - t_start
@@ -71,6 +71,8 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                 est += f" ({sol.error_estimate_note})"
             if sol.corrected:
                 est += " (FEM-corrected)"
+            if sol.contact is not None:
+                est += f", {sol.contact['pairs']} contact pair(s), gap {sol.contact['min_distance']:.2g}"
             progress(f"frame {k + 1}/{spec.frames}: {sol.iterations} it"
                      + (f" ({sol.cg_iterations} CG)" if sol.cg_iterations else "")
                      + f", E = {sol.energy:.6g}, {sol.time_s:.2f} s{est}, ~{left:.0f} s left{flag}")

@@ -43,6 +43,13 @@
     eigen_filter = "clamp"       # or "abs"; negative_curvature = true (FEM at saddles)
     threads = 2
 
+    [contact]                    # surfaces that touch without passing through (FEM; needs ipctk)
+    pairs = [["flexor", "humerus"]]   # parts that may touch (omit: every pair but bone-bone)
+    self_contact = false
+    distance = 0.002             # the barrier's reach in scene units (omit: 5e-3 x the diagonal,
+                                 # at most half the smallest rest gap)
+    stiffness = 2e4              # the barrier's pressure scale, Pa (omit: the softest muscle's mu)
+
     [frames]
     count = 30
     dt = 0.0333                  # seconds per frame: frame k is at time k * dt
@@ -112,6 +119,7 @@ _SCHEMA = {
                "bone_coarse_space": bool, "accuracy": float, "error_estimate": bool, "fem_correction": bool,
                "lagged_factor": bool, "recycled_directions": int, "eigen_filter": str, "negative_curvature": bool},
     "frames": {"count": int, "dt": float},
+    "contact": {"pairs": list, "self_contact": bool, "distance": float, "stiffness": float},
     "activation": "table of tables",
     "bones": "table of tables",
     "joints": "table of tables",
@@ -263,6 +271,17 @@ def load_scene_file(path) -> SceneSpec:
         if len(g) != 3 or not all(_type_ok(v, float) for v in g):
             raise SceneFileError(f"gravity must be three numbers, got {g!r}")
         scene.gravity = np.asarray(g, dtype=np.float64)
+    if "contact" in data:
+        c = data["contact"]
+        pairs = c.get("pairs")
+        if pairs is not None and not all(isinstance(p, list) and len(p) == 2 and all(isinstance(n, str) for n in p)
+                                         for p in pairs):
+            raise SceneFileError(f"contact.pairs must be a list of [part, part] name pairs, got {pairs!r}")
+        try:
+            scene.enable_contact(pairs, self_contact=bool(c.get("self_contact", False)),
+                                 distance=c.get("distance"), stiffness=c.get("stiffness"))
+        except ValueError as e:
+            raise SceneFileError(f"contact: {e}") from None
     solver = dict(data.get("solver", {}))
     frames = data.get("frames", {})
     count, dt = int(frames.get("count", 1)), float(frames.get("dt", 1.0))

@@ -1,27 +1,14 @@
-"""Boundary surface of a tet mesh and Wavefront OBJ output (for Blender)."""
+"""Wavefront OBJ output of a boundary surface (for Blender); boundary_faces
+lives in emu.geometry (contact uses it too)."""
 from __future__ import annotations
 
 import os
 
 import numpy as np
 
+from ..geometry import boundary_faces
+
 __all__ = ["boundary_faces", "write_obj"]
-
-# outward faces of a positively oriented tet (a, b, c, d)
-_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-
-
-def boundary_faces(tets: np.ndarray, return_tets: bool = False):
-    """Triangles of tets (m, 4) that belong to exactly one tet, outward-oriented:
-    (f, 3) vertex ids (and, with return_tets, the tet of each: (f,))."""
-    faces = tets[:, _FACES].reshape(-1, 3)
-    key = np.sort(faces, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    on = counts[inverse.ravel()] == 1
-    if return_tets:
-        return faces[on], np.repeat(np.arange(len(tets)), 4)[on]
-    return faces[on]
-
 
 def write_obj(path, points: np.ndarray, faces: np.ndarray):
     """A triangle surface as Wavefront OBJ (1-based indices), for Blender:
