@@ -167,6 +167,71 @@ def test_default_distance_stays_below_the_rest_gap():
     assert term.active_pairs(narrow.points) == 0   # nothing pushes at rest
 
 
+def ipctk_zero(n):
+    import scipy.sparse as sp
+    return sp.csc_matrix((n, n))
+
+
+def _emu_rows(solver, sol):
+    """EMU's unknowns (#unknowns by 9, vec(F) column-major) from a Solution."""
+    F = sol.F[solver._model_tets].transpose(0, 2, 1).reshape(-1, 9)
+    first = {}
+    for t, u in enumerate(np.asarray(solver._core.tet_unknown)):
+        first.setdefault(int(u), t)
+    return F[[first[u] for u in range(len(first))]]
+
+
+@pytest.mark.parametrize("scene_name", ["beam", "elbow"])
+def test_emu_contact_gradient_and_hessian_through_the_fit(scene_name):
+    """E_c(x*(F)) in EMU's energy: its gradient (one back-substitution through
+    the ACAP factor) and Hessian product J^T H_c J v against finite differences,
+    at an iterate with contact pairs (the contact projection off; the material
+    blocks exact)."""
+    if scene_name == "beam":
+        scene, act, gravity = emu.scenes.beam_on_bone(), None, GRAVITY
+    else:   # a movable forearm: bone unknowns carry contact forces too
+        scene, act, gravity = emu.scenes.elbow_wrap(2, max_activation=2e6), {"flexor": 0.6}, None
+    scene.enable_contact()
+    solver = emu.Solver(scene, "emu", alpha=100.0, error_estimate=False)
+    sol = solver.solve(act, normalized=True, gravity=gravity)
+    assert sol.converged and sol.contact["pairs"] > 0
+    solver.contact.project = ipctk.PSDProjectionMethod.NONE
+    load = solver.load_case(act, normalized=True, gravity=gravity)
+    core = solver._core
+    F = _emu_rows(solver, sol)
+    rng = np.random.default_rng(2)
+    V = rng.standard_normal(F.shape)          # every unknown, the forearm's F too
+    V *= 1e-6 / np.abs(V).max()
+    g = core.gradient(load, F)
+    fd = (core.energy(load, F + V) - core.energy(load, F - V)) / 2
+    assert fd == pytest.approx((g * V).sum(), rel=1e-4)
+    Hv = core.hessian_product(load, F, V, True)
+    fd_H = (core.gradient(load, F + V) - core.gradient(load, F - V)) / 2
+    # the soft rows (a bone's gradient row sums its tets' ACAP terms at weight 1e4:
+    # its differences cancel to 1e-10 with contact or without)
+    soft = len(scene.model_tets) - sum(len(scene.parts[b].tets) for b in scene.movable_bones)
+    scale = np.abs(Hv[:soft]).max()
+    assert np.abs(fd_H - Hv)[:soft].max() <= 1e-6 * scale
+    # the contact term is a real share of the product: without it the check fails
+    solver.contact.hessian = lambda x: ipctk_zero(3 * len(x))
+    Hv0 = core.hessian_product(load, F, V, True)
+    assert np.abs(fd_H - Hv0)[:soft].max() > 1e-3 * scale
+
+
+def test_emu_with_contact_matches_fem():
+    scene = emu.scenes.beam_on_bone()
+    scene.enable_contact()
+    fem = emu.solve(scene, method="fem", gravity=GRAVITY)
+    sol = emu.Solver(scene, "emu").solve(gravity=GRAVITY)
+    assert sol.converged and not sol.contact["intersecting"]
+    muscle = muscle_vertices(scene, "muscle")
+    bone_top = scene.points[muscle_vertices(scene, "bone"), 2].max()
+    assert sol.positions[muscle, 2].min() > bone_top
+    err = emu.vertex_error(sol.positions, fem.positions, scene.points)
+    assert err < 0.01                                    # the accuracy asked for (the default)
+    assert sol.error_estimate == pytest.approx(err, rel=0.5)
+
+
 def test_contact_refusals_name_the_fix():
     scene = emu.scenes.beam_on_bone()
     with pytest.raises(ValueError, match="no part named 'femur'"):
@@ -176,8 +241,6 @@ def test_contact_refusals_name_the_fix():
     with pytest.raises(ValueError, match="distance must be a positive"):
         scene.enable_contact(distance=-1.0)
     scene.enable_contact()
-    with pytest.raises(ValueError, match="method='fem'"):
-        emu.Solver(scene, "emu")
     with pytest.raises(ValueError, match="lagged_factor"):
         emu.Solver(scene, "fem", lagged_factor=True)
     # a start state with surfaces through each other
@@ -186,6 +249,10 @@ def test_contact_refusals_name_the_fix():
     x[muscle_vertices(scene, "muscle"), 2] -= 0.006
     with pytest.raises(ValueError, match="pass through each other at the start"):
         solver.solve(initial=x)
+    # EMU: pins moved into the bone in one frame (its fit starts there)
+    sunk = scene.points[scene.pinned] - np.array([0.0, 0.0, 0.006])
+    with pytest.raises(ValueError, match="pass through each other at the start"):
+        emu.Solver(scene, "emu").solve(pin_positions=sunk)
     scene.contact = None
     assert emu.Solver(scene, "emu").contact is None
 

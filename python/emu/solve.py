@@ -299,9 +299,6 @@ class Solver:
             self.settings.update(lagged_factor=True, lagged_cg_iterations=int(lagged_cg_iterations))
         self.contact = None   # the ContactTerm of a scene with contact (scene.enable_contact)
         if scene.contact is not None:
-            if method != "fem":
-                raise ValueError("this scene has contact (scene.enable_contact), which only method='fem' solves "
-                                 "so far; use method='fem', or scene.contact = None to solve it without")
             if lagged_factor:
                 raise ValueError("lagged_factor does not handle contact yet (the contact pairs change the "
                                  "Newton matrix's pattern); leave it off for scenes with contact")
@@ -534,10 +531,13 @@ class Solver:
             return False
         try:
             x2 = self._estimator.newton_correction(load, x1, max_steps=1)
-        except RuntimeError:
+        except (RuntimeError, ValueError):   # ValueError: with contact, x1 has surfaces through each other
             return False
         if not np.all(np.isfinite(x2)):
             return False
+        if self.contact is not None and (self.contact.intersecting(x2) or
+                                         self.contact.max_step(sol.positions, x2) < 1.0):
+            return False   # full Newton steps know no collision detection: keep EMU's own answer
         step = vertex_error(x1, x2)
         if not (step <= CORRECTION_CONTRACTION * own and step <= ACCEPT * target):
             return False
@@ -626,7 +626,9 @@ class Solver:
             opts = _core.SolverOptions()
             # the corrections of a sequence's frames (and of accuracy mode's
             # re-solves) by PCG on the last factorisation (docs/DESIGN.md)
-            opts.lagged_cg_iterations = ESTIMATE_LAGGED_CG
+            opts.lagged_cg_iterations = ESTIMATE_LAGGED_CG   # (without contact: its pattern changes)
+            if self.contact is not None:   # the same energy as EMU's
+                opts.set_contact(self.contact)
             try:
                 self._estimator = _core.FemSolver(self.model, opts)
             except ValueError as e:   # e.g. a joint between two movable bones

@@ -1,6 +1,7 @@
 #include "emu/solvers/emu_solver.h"
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include "emu/energy/acap_coupling.h"
@@ -33,9 +34,6 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   if (!(emu_.alpha > 0) || !std::isfinite(emu_.alpha)) throw std::invalid_argument("alpha must be positive and finite");
   if (emu_.modes < 0) throw std::invalid_argument("the number of modes must be >= 0");
   if (emu_.lbfgs_memory < 1) throw std::invalid_argument("lbfgs_memory must be >= 1");
-  if (options_.contact.active())
-    throw std::invalid_argument("contact is handled by the FEM solver only so far; use method='fem' for scenes "
-                                "with contact");
   if (layout_.num_bones && emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur)
     throw std::invalid_argument("the Schur-complement preconditioner does not handle movable bones; "
                                 "use preconditioner='woodbury'");
@@ -281,6 +279,46 @@ Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
   return rows.transpose();
 }
 
+void EmuSolver::position_force_to_unknowns(const Eigen::MatrixX3d& f, Mat9X& out) const {
+  // As the gravity term's constant solve (make_context): S^T f, K_c^-1, S, F_t, w_t V_t.
+  Eigen::MatrixX3d R;
+  acap_->reduce_vertex(f, R);
+  Eigen::MatrixXd Z;
+  acap_->solve(Eigen::MatrixXd(R), Z);
+  Eigen::MatrixX3d y = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
+  acap_->expand(Eigen::MatrixX3d(Z), y);
+  Mat9X per_tet;
+  deformation_gradients(layout_, model_.tets, y, per_tet);
+  const auto& wv = acap_->weight_volume();
+  for (Eigen::Index t = 0; t < per_tet.cols(); ++t) per_tet.col(t) *= wv(t);
+  reduce_to_unknowns(layout_, per_tet, out);
+}
+
+void EmuSolver::add_contact_gradient(const Eigen::MatrixX3d& x, Mat9X& g) const {
+  if (!has_contact()) return;
+  const Eigen::MatrixX3d gx = options_.contact.gradient(x);
+  if (gx.rows() != x.rows() || !gx.allFinite()) throw std::runtime_error("the contact gradient must be finite and #V by 3");
+  if (gx.isZero(0.0)) return;
+  Mat9X gF;
+  position_force_to_unknowns(gx, gF);
+  g += gF;
+}
+
+void EmuSolver::add_position_hessian_product(const Eigen::SparseMatrix<double>& H, const Mat9X& v, Mat9X& out) const {
+  if (H.nonZeros() == 0) return;
+  Eigen::MatrixX3d dx;
+  Mat9X Fd;
+  fit_linear_into(v, dx, Fd);
+  // H acts on vertex-major dofs 3 w + i: the rows of dx, flattened row by row.
+  const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> dxr = dx;
+  const Eigen::VectorXd Hdx = H * Eigen::Map<const Eigen::VectorXd>(dxr.data(), dxr.size());
+  const Eigen::MatrixX3d f = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+      Hdx.data(), dx.rows(), 3);
+  Mat9X add;
+  position_force_to_unknowns(f, add);
+  out += add;
+}
+
 double EmuSolver::energy(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
   const Context c = make_context(load);
   const Mat9X F = to_cols(Frows);
@@ -289,7 +327,7 @@ double EmuSolver::energy(const LoadCase& load, const Eigen::MatrixXd& Frows) con
   fit_into(c, F, x, Fx);
   double E = energy_along(c, F, Fx, nullptr, nullptr, 0.0);
   E -= load_work(c, x);
-  return E;
+  return E + contact_energy(x);
 }
 
 Eigen::MatrixXd EmuSolver::gradient(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
@@ -299,6 +337,7 @@ Eigen::MatrixXd EmuSolver::gradient(const LoadCase& load, const Eigen::MatrixXd&
   Mat9X Fx, g;
   fit_into(c, F, x, Fx);
   gradient_into(c, F, Fx, g);
+  add_contact_gradient(x, g);
   return g.transpose();
 }
 
@@ -314,9 +353,16 @@ Eigen::MatrixXd EmuSolver::hessian_product(const LoadCase& load, const Eigen::Ma
                                            const Eigen::MatrixXd& Vrows, bool exact) const {
   const Context c = make_context(load);
   std::vector<Mat9> A, A_exact;
-  blocks_into(c, to_cols(Frows), &A, &A_exact);
+  const Mat9X F = to_cols(Frows), V = to_cols(Vrows);
+  blocks_into(c, F, &A, &A_exact);
   Mat9X out;
-  hessian_product_into(exact ? A_exact : A, to_cols(Vrows), out);
+  hessian_product_into(exact ? A_exact : A, V, out);
+  if (has_contact()) {  // J^T H_c J v at the fit of F
+    Eigen::MatrixX3d x;
+    Mat9X Fx;
+    fit_into(c, F, x, Fx);
+    add_position_hessian_product(options_.contact.hessian(x), V, out);
+  }
   return out.transpose();
 }
 
@@ -407,7 +453,12 @@ class EmuSolver::Newton {
   Newton(EmuSolver& s, const Context& c, Mat9X F)
       : s_(s), c_(c), bones_(s.layout_.num_bones > 0), F_(std::move(F)), coarse_(s.layout_, s.emu_.alpha) {
     s_.fit_into(c_, F_, x_, Fx_);
-    E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_);
+    if (s_.has_contact() && s_.options_.contact.check_start) s_.options_.contact.check_start(x_);
+    E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_) + s_.contact_energy(x_);
+    if (!std::isfinite(E_))
+      throw std::invalid_argument(
+          "the start state has a non-finite energy: with contact, surfaces that touch or intersect (move "
+          "the pins or bones in smaller steps between solves, or start from positions without contact)");
     update_gradient();
   }
 
@@ -449,9 +500,23 @@ class EmuSolver::Newton {
       s_.blocks_into(c_, F_, nullptr, &A_exact_);
     }
     const std::vector<Mat9>& H = exact ? A_exact_ : A_;
+    if (s_.has_contact()) {
+      ScopedSeconds timer(time.hessian);
+      Hc_ = s_.options_.contact.hessian(x_);
+      const Eigen::Index n3 = 3 * x_.rows();
+      if (Hc_.rows() != n3 || Hc_.cols() != n3) throw std::runtime_error("the contact Hessian must be 3 #V by 3 #V");
+    }
+    // Contact's curvature J^T H_c J enters the products (the preconditioner
+    // leaves it out); with bones its bone columns are projected like the rest.
     auto product = [&](const Mat9X& v, Mat9X& out) {
       if (bones_) s_.riemannian_product(H, F_, g_, v, exact, out);
       else s_.hessian_product_into(H, v, out);
+      if (s_.has_contact() && Hc_.nonZeros()) {
+        Mat9X add = Mat9X::Zero(9, out.cols());
+        s_.add_position_hessian_product(Hc_, v, add);
+        if (bones_) s_.project_tangent(F_, add);
+        out += add;
+      }
     };
     // The bone coarse space follows the Hessian CG uses (rebuilt every step;
     // for L-BFGS, whose H0 it is part of, with the Woodbury term).
@@ -498,6 +563,22 @@ class EmuSolver::Newton {
       Wx_ = s_.load_work(c_, x_);
       Wdx_ = s_.load_work(c_, dx_);
     }
+    if (s_.has_contact()) {
+      ScopedSeconds timer(time.line_search);
+      const double smax = collision_free_step();
+      if (!(smax > 0))
+        return dir.fail("contact: continuous collision detection allows no step along the Newton direction "
+                        "(surfaces touching; a larger contact distance may help)");
+      if (smax < 1) {
+        d_ *= smax;
+        dir.slope *= smax;
+        if (!bones_) {
+          dx_ *= smax;
+          Fd_ *= smax;
+          Wdx_ *= smax;
+        }
+      }
+    }
     exact_step_ = exact;
     dir_cg_ = dir.cg_iterations;
     return dir;
@@ -505,20 +586,29 @@ class EmuSolver::Newton {
 
   double trial_energy(double s) {
     trial_s_ = s;
-    if (!bones_) return s_.energy_along(c_, F_, Fx_, &d_, &Fd_, s) - Wx_ - s * Wdx_;
+    if (!bones_) {
+      const double E = s_.energy_along(c_, F_, Fx_, &d_, &Fd_, s) - Wx_ - s * Wdx_;
+      return s_.has_contact() ? E + s_.contact_energy(x_ + s * dx_) : E;
+    }
     s_.retract(F_, d_, s, Ftrial_);
     s_.fit_into(c_, Ftrial_, xtrial_, Fxtrial_);
-    return s_.energy_along(c_, Ftrial_, Fxtrial_, nullptr, nullptr, 0.0) - s_.load_work(c_, xtrial_);
+    // the fit's path along a bone's retraction is not straight: its CCD is checked per trial
+    if (s_.has_contact() && s_.options_.contact.max_step(x_, xtrial_) < 1.0)
+      return std::numeric_limits<double>::infinity();
+    return s_.energy_along(c_, Ftrial_, Fxtrial_, nullptr, nullptr, 0.0) - s_.load_work(c_, xtrial_) +
+           s_.contact_energy(xtrial_);
   }
 
   double trial_grad_norm() {
     Mat9X g1;
     if (bones_) {  // the retracted trial point and its fit, from trial_energy
       s_.gradient_into(c_, Ftrial_, Fxtrial_, g1);
+      s_.add_contact_gradient(xtrial_, g1);
       s_.project_tangent(Ftrial_, g1);
     } else {
       const Mat9X F1 = F_ + trial_s_ * d_, Fx1 = Fx_ + trial_s_ * Fd_;
       s_.gradient_into(c_, F1, Fx1, g1);
+      if (s_.has_contact()) s_.add_contact_gradient(x_ + trial_s_ * dx_, g1);
     }
     return g1.norm();
   }
@@ -533,7 +623,7 @@ class EmuSolver::Newton {
     } else if (it % 50 == 0) {  // x*(F) is linear in F; refit now and then against drift
       F_ += s * d_;
       s_.fit_into(c_, F_, x_, Fx_);
-      E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_);
+      E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_) + s_.contact_energy(x_);
     } else {
       F_ += s * d_;
       x_ += s * dx_;
@@ -581,8 +671,19 @@ class EmuSolver::Newton {
     recycled_.push_back(std::move(dn));
     if (static_cast<int>(recycled_.size()) > s_.emu_.recycled_directions) recycled_.erase(recycled_.begin());
   }
+  // Contact: the largest step s <= 1 along d_ whose fitted positions' straight
+  // path creates no intersection (without bones x*(F + s d) = x + s dx exactly).
+  double collision_free_step() {
+    if (!bones_) return s_.options_.contact.max_step(x_, x_ + dx_);
+    Mat9X F1, Fx1;
+    Eigen::MatrixX3d x1;
+    s_.retract(F_, d_, 1.0, F1);
+    s_.fit_into(c_, F1, x1, Fx1);
+    return s_.options_.contact.max_step(x_, x1);
+  }
   void update_gradient() {
     s_.gradient_into(c_, F_, Fx_, g_);
+    s_.add_contact_gradient(x_, g_);
     gR_ = g_;
     if (bones_) s_.project_tangent(F_, gR_);
     gn_ = gR_.norm();
@@ -602,6 +703,7 @@ class EmuSolver::Newton {
   Eigen::MatrixX3d x_, dx_, xtrial_;
   double E_ = 0, gn_ = 0, g0_ = -1, Wx_ = 0, Wdx_ = 0, trial_s_ = -1;
   std::vector<Mat9> A_, A_exact_;
+  Eigen::SparseMatrix<double> Hc_;  // contact Hessian at the iterate (3 #V square)
   bool exact_ok_ = true, exact_step_ = false;
   int since_refresh_ = 0, cg_after_refresh_ = -1, last_cg_ = 0, dir_cg_ = 0;
   BoneCoarseSpace coarse_;

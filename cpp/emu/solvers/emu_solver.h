@@ -23,6 +23,8 @@
 // Unknowns: one per soft tet (tet order), then one per bone; the diagnostic
 // functions take and return #unknowns by 9 arrays (= #T by 9 without bones).
 #include <memory>
+
+#include <Eigen/SparseCore>
 #include <string>
 #include <utility>
 
@@ -54,7 +56,8 @@ class EmuSolver {
   double energy(const LoadCase& load, const Eigen::MatrixXd& F) const;
   Eigen::MatrixXd gradient(const LoadCase& load, const Eigen::MatrixXd& F) const;
   Eigen::MatrixX3d fit_positions(const LoadCase& load, const Eigen::MatrixXd& F) const;
-  /// Exact Hessian times V: material blocks PSD-filtered, or unfiltered with exact = true.
+  /// Exact Hessian times V: material blocks PSD-filtered, or unfiltered with exact = true
+  /// (with contact, plus J^T H_c J V: the contact Hessian as the term gives it).
   Eigen::MatrixXd hessian_product(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& V,
                                   bool exact = false) const;
   /// H_k^-1 R with the solver's k modes.
@@ -117,6 +120,17 @@ class EmuSolver {
   void riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                           bool curvature, Mat9X& out) const;
   Mat9X to_cols(const Eigen::MatrixXd& rows) const;
+  // Contact (SolverOptions::contact) on the fitted positions x = x*(F):
+  //   E_c(x*(F)),  dE_c/dF = C^T K_c^-1 S^T g_x  (one back-substitution),
+  //   Hessian J^T H_c J with J = dx*/dF = S K_c^-1 C (two per product).
+  bool has_contact() const { return options_.contact.active(); }
+  double contact_energy(const Eigen::MatrixX3d& x) const { return has_contact() ? options_.contact.energy(x) : 0.0; }
+  /// out (9 x #unknowns) = J^T f for vertex forces f (#V by 3): C^T K_c^-1 S^T f per tet, summed per unknown.
+  void position_force_to_unknowns(const Eigen::MatrixX3d& f, Mat9X& out) const;
+  /// g += dE_c/dF at the fit x.
+  void add_contact_gradient(const Eigen::MatrixX3d& x, Mat9X& g) const;
+  /// out += J^T H J v (H: 3 #V by 3 #V, the contact Hessian at the iterate).
+  void add_position_hessian_product(const Eigen::SparseMatrix<double>& H, const Mat9X& v, Mat9X& out) const;
 
   Model model_;
   UnknownLayout layout_;

@@ -48,9 +48,9 @@ struct SolverOptions {
   // every accepted iterate; returning true stops the solve with status
   // "stopped by on_iteration" (error-against-time curves, custom stopping).
   std::function<bool(const IterationRecord&, const Eigen::MatrixX3d&)> on_iteration;
-  // FEM: contact barriers on the positions (none when inactive): added to the
-  // energy, gradient and Newton matrix; every step capped by continuous
-  // collision detection (contact/position_term.h).
+  // Contact barriers on the positions (none when inactive): added to the
+  // energy, gradient and Newton matrix (EMU: on the fit x*(F)); every step
+  // capped by continuous collision detection (contact/position_term.h).
   PositionTerm contact;
 };
 
