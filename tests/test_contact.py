@@ -232,6 +232,27 @@ def test_emu_with_contact_matches_fem():
     assert sol.error_estimate == pytest.approx(err, rel=0.5)
 
 
+def test_emu_sequence_with_contact_within_its_accuracy_of_fem():
+    """The elbow bent far, the extensor pressed against the bones: EMU's answers
+    within the accuracy asked for of the FEM equilibrium nearest them (FEM
+    warm-started from EMU's answer), and its error estimate tracks that error
+    (no FEM correction with contact). The nearest one: frictionless sliding
+    leaves a nearly flat valley, and FEM from the previous frame's answer
+    stops up to 0.8% away along it at the same energy (docs/DESIGN.md)."""
+    scene = emu.scenes.elbow_wrap(2, max_activation=2e6)
+    scene.enable_contact()
+    fem, em = emu.Solver(scene, "fem"), emu.Solver(scene, "emu", accuracy=0.01)
+    assert em.fem_correction is False
+    pe = None
+    for a in np.linspace(0.25, 1.0, 4):
+        pe = em.solve({"flexor": a}, normalized=True, initial=pe)
+        pf = fem.solve({"flexor": a}, normalized=True, initial=pe.positions)
+        err = emu.vertex_error(pe.positions, pf.positions, scene.points)
+        assert pe.converged and pf.converged and not pe.corrected and pe.contact["pairs"] > 0
+        assert err < 0.01, (a, err)
+        assert 0.5 * err <= pe.error_estimate <= 2 * err, (a, err, pe.error_estimate)
+
+
 def test_contact_refusals_name_the_fix():
     scene = emu.scenes.beam_on_bone()
     with pytest.raises(ValueError, match="no part named 'femur'"):

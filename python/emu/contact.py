@@ -19,6 +19,7 @@ contact builds nothing here and never imports ipctk.
 """
 from __future__ import annotations
 
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -170,6 +171,8 @@ class ContactTerm:
         self._key = None
         self._collisions = None
         self.evaluations = 0
+        # seconds spent per kind of call (bench/contact.py reports them)
+        self.seconds = dict.fromkeys(("collisions", "energy", "gradient", "hessian", "ccd"), 0.0)
 
     def _rest_gap(self, points, reach) -> float:
         """The smallest distance between surface elements that may touch at rest,
@@ -203,12 +206,14 @@ class ContactTerm:
         V = self.surface_positions(x)
         key = V.tobytes()
         if key != self._key:
+            t0 = time.perf_counter()
             c = self._ipctk.NormalCollisions()
             c.use_area_weighting = True
             with self._broad_phase():
                 c.build(self.mesh, V, self.distance)
             self._key, self._collisions = key, c
             self.evaluations += 1
+            self.seconds["collisions"] += time.perf_counter() - t0
         return V, self._collisions
 
     def minimum_distance(self, x) -> float:
@@ -236,14 +241,20 @@ class ContactTerm:
 
     def energy(self, x) -> float:
         V, c = self._at(x)
-        return float(self.potential(c, self.mesh, V)) if len(c) else 0.0
+        t0 = time.perf_counter()
+        e = float(self.potential(c, self.mesh, V)) if len(c) else 0.0
+        self.seconds["energy"] += time.perf_counter() - t0
+        return e
 
     def gradient(self, x) -> np.ndarray:
         V, c = self._at(x)
         n = self.mesh.full_num_vertices
         if not len(c):
             return np.zeros((n, 3))
-        return self.mesh.to_full_dof(self.potential.gradient(c, self.mesh, V)).reshape(n, 3)
+        t0 = time.perf_counter()
+        g = self.mesh.to_full_dof(self.potential.gradient(c, self.mesh, V)).reshape(n, 3)
+        self.seconds["gradient"] += time.perf_counter() - t0
+        return g
 
     def hessian(self, x):
         V, c = self._at(x)
@@ -251,13 +262,19 @@ class ContactTerm:
         if not len(c):
             import scipy.sparse as sp
             return sp.csc_matrix((n3, n3))
-        return self.mesh.to_full_dof(self.potential.hessian(c, self.mesh, V, project_hessian_to_psd=self.project))
+        t0 = time.perf_counter()
+        H = self.mesh.to_full_dof(self.potential.hessian(c, self.mesh, V, project_hessian_to_psd=self.project))
+        self.seconds["hessian"] += time.perf_counter() - t0
+        return H
 
     def max_step(self, x0, x1) -> float:
         """The largest s in [0, 1] with the straight path x0 -> x0 + s (x1 - x0) free of crossings."""
+        t0 = time.perf_counter()
         with self._broad_phase():
-            return float(self._ipctk.compute_collision_free_stepsize(
+            s = float(self._ipctk.compute_collision_free_stepsize(
                 self.mesh, self.surface_positions(x0), self.surface_positions(x1)))
+        self.seconds["ccd"] += time.perf_counter() - t0
+        return s
 
 
 def _patches(allowed: np.ndarray, present: np.ndarray):

@@ -5,6 +5,7 @@
     gravity = [0.0, 0.0, 0.0]
 
     [mesh]                       # exactly one of: path | dataset | [mesh.fusiform] | [mesh.arm] | [mesh.neck]
+                                 # | [mesh.elbow_wrap]
     path = "muscle.vtu"          # a labelled mesh file, relative to the scene file
     dataset = "big_muscle"       # or one of the authors' research scenes (simple_joint, big_muscle,
                                  # realistic_biceps), downloaded on first use (emu.datasets, `emu data`)
@@ -12,6 +13,8 @@
     [mesh.arm]                   # the procedural arm of `emu demo`: bones "humerus" (fixed) and
     resolution = 2               # "forearm" (moved by the muscles) on a hinge, muscles "flexor"
                                  # and "extensor" (Laplace fibres)
+    [mesh.elbow_wrap]            # the arm's bones and flexor, and an extensor one block clear of the
+    resolution = 2               # bones behind the elbow (emu.scenes.elbow_wrap): for contact
     [mesh.neck]                  # a head on a ball joint: bones "torso" (fixed) and "head" (moved),
     resolution = 2               # muscles "left_back", "right_back", "left_front", "right_front"
     [mesh.fusiform]              # the procedural muscle (emu.scenes.fusiform): parts "belly"
@@ -96,7 +99,7 @@ from .. import datasets
 from ..io.mesh import load_scene
 from ..parts import lame
 from ..poses import pose_about
-from ..scenes import arm, fusiform, neck
+from ..scenes import arm, elbow_wrap, fusiform, neck
 
 __all__ = ["SceneSpec", "load_scene_file", "SceneFileError"]
 
@@ -109,7 +112,7 @@ _SCHEMA = {
     "mesh": {"path": str, "dataset": str, "fibers": str, "fusiform": {"tets": int, "resolution": int, "length": float,
                                                      "radius": float, "end_radius": float,
                                                      "tendon_fraction": float},
-             "arm": {"resolution": int}, "neck": {"resolution": int}},
+             "arm": {"resolution": int}, "neck": {"resolution": int}, "elbow_wrap": {"resolution": int}},
     "materials": "table of tables",
     "pins": list,
     "gravity": list,
@@ -218,9 +221,9 @@ def load_scene_file(path) -> SceneSpec:
     mesh = data.get("mesh")
     if mesh is None:
         raise SceneFileError("missing [mesh] table (mesh.path, mesh.dataset or [mesh.fusiform])")
-    if sum(k in mesh for k in ("path", "dataset", "fusiform", "arm", "neck")) != 1:
-        raise SceneFileError("[mesh] needs exactly one of 'path', 'dataset', [mesh.fusiform], [mesh.arm] or "
-                             "[mesh.neck]")
+    if sum(k in mesh for k in ("path", "dataset", "fusiform", "arm", "neck", "elbow_wrap")) != 1:
+        raise SceneFileError("[mesh] needs exactly one of 'path', 'dataset', [mesh.fusiform], [mesh.arm], "
+                             "[mesh.neck] or [mesh.elbow_wrap]")
     if "fibers" in mesh and not ("path" in mesh or "dataset" in mesh):
         raise SceneFileError("mesh.fibers applies to mesh.path or mesh.dataset only")
     if "path" in mesh or "dataset" in mesh:
@@ -237,12 +240,12 @@ def load_scene_file(path) -> SceneSpec:
         if fib not in ("file", "laplace"):
             raise SceneFileError(f"mesh.fibers must be 'file' or 'laplace', got {fib!r}")
         scene = load_scene(mpath, fibers=fib)
-    elif "arm" in mesh or "neck" in mesh:
-        kind = "arm" if "arm" in mesh else "neck"
+    elif "arm" in mesh or "neck" in mesh or "elbow_wrap" in mesh:
+        kind = next(k for k in ("arm", "neck", "elbow_wrap") if k in mesh)
         res = int(mesh[kind].get("resolution", 2))
         if res < 1:
             raise SceneFileError(f"mesh.{kind}.resolution must be >= 1, got {res}")
-        scene = (arm if kind == "arm" else neck)(res)
+        scene = {"arm": arm, "neck": neck, "elbow_wrap": elbow_wrap}[kind](res)
     else:
         scene = fusiform(**mesh["fusiform"], pins=())
     named_pins = scene.vertex_sets
