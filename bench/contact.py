@@ -10,7 +10,9 @@ its share, per Newton iteration, and whether the extensor passes through a
 bone in any frame; EMU's vertex error with contact on, to FEM's answer of the
 same frame and to the FEM equilibrium nearest EMU's (FEM warm-started from
 it: frictionless sliding leaves a nearly flat valley), and EMU's own error
-estimate. A PNG compares the frames with contact off and on.
+estimate; then the same with accuracy mode's FEM correction forced on
+(fem_correction=True; off by default with contact). A PNG compares the
+frames with contact off and on.
 
     python bench/contact.py [--resolution 2] [--frames 12] [--threads 1] [--out bench/contact]
 """
@@ -30,13 +32,14 @@ from emu.io.plots import contact_sheet
 MAX_ACTIVATION = 2e6
 
 
-def run(resolution: int, frames: int, method: str, contact: bool) -> dict:
+def run(resolution: int, frames: int, method: str, contact: bool, fem_correction=None) -> dict:
     scene = emu.scenes.elbow_wrap(resolution, max_activation=MAX_ACTIVATION)
     bones = ContactTerm(scene, ContactSettings(pairs=[("extensor", "humerus"), ("extensor", "forearm")]))
     if contact:
         scene.enable_contact()
-    solver = emu.Solver(scene, method, **({"accuracy": 0.01} if method == "emu" else {}))
-    prev, out = None, {"positions": [], "estimates": [], "activations": [], "solve_s": 0.0, "estimate_s": 0.0, "iterations": 0, "cg": 0,
+    solver = emu.Solver(scene, method, **({"accuracy": 0.01, "fem_correction": fem_correction}
+                                          if method == "emu" else {}))
+    prev, out = None, {"positions": [], "estimates": [], "activations": [], "corrected": 0, "solve_s": 0.0, "estimate_s": 0.0, "iterations": 0, "cg": 0,
                        "through": 0, "converged": True}
     t0 = time.perf_counter()
     for a in np.linspace(0.0, 1.0, frames):
@@ -50,6 +53,7 @@ def run(resolution: int, frames: int, method: str, contact: bool) -> dict:
         out["through"] += bones.intersecting(sol.positions)
         out["positions"].append(sol.positions)
         out["estimates"].append(sol.error_estimate)
+        out["corrected"] += sol.corrected
         out["activations"].append(float(a))
     out["wall_s"] = time.perf_counter() - t0
     out["contact_s"] = sum(solver.contact.seconds.values()) if solver.contact else 0.0
@@ -86,18 +90,21 @@ def main():
                       f"{r['iterations']}{cg} | {r['contact_s']:.2f} | {100 * share:.0f}% | {per:.1f} | "
                       f"{r['through']} of {args.frames} | {r['angle']:.1f} |"
                       + ("" if r["converged"] else " not converged"))
-        e, f = runs["emu", True], runs["fem", True]
+        f = runs["fem", True]
         pts = f["scene"].points
-        err = max(emu.vertex_error(a, b, pts) for a, b in zip(e["positions"], f["positions"]))
         nearest = emu.Solver(f["scene"], "fem")
-        near = [emu.vertex_error(x, nearest.solve({"flexor": a}, normalized=True, initial=x).positions, pts)
-                for x, a in zip(e["positions"], e["activations"])]
-        ratios = [est / t for est, t in zip(e["estimates"], near) if est is not None and t > 1e-6]
-        parts = e["contact_parts"]
-        print(f"\n{f['tets']} tets, EMU with contact: largest vertex error over the frames {err:.2e} of the "
-              f"diagonal to FEM's sequence, {max(near):.2e} to the FEM equilibrium nearest it; its estimate / that "
-              f"error {min(ratios):.2f} to {max(ratios):.2f}. EMU's contact time by call: "
-              + ", ".join(f"{k} {v:.2f} s" for k, v in parts.items()) + "\n")
+        for label, e in (("default (no FEM correction)", runs["emu", True]),
+                         ("fem_correction=True", run(res, args.frames, "emu", True, fem_correction=True))):
+            err = [emu.vertex_error(a, b, pts) for a, b in zip(e["positions"], f["positions"])]
+            near = [emu.vertex_error(x, nearest.solve({"flexor": a}, normalized=True, initial=x).positions, pts)
+                    for x, a in zip(e["positions"], e["activations"])]
+            ratios = [est / t for est, t in zip(e["estimates"], near) if est is not None and t > 1e-6]
+            print(f"\n{f['tets']} tets, EMU with contact, {label}: {e['corrected']} of {args.frames} frames "
+                  f"FEM-corrected; vertex error over the frames {min(err):.2e} to {max(err):.2e} of the diagonal to "
+                  f"FEM's sequence, {min(near):.2e} to {max(near):.2e} to the FEM equilibrium nearest it; its "
+                  f"estimate / that error {min(ratios):.2f} to {max(ratios):.2f}")
+        parts = runs["emu", True]["contact_parts"]
+        print("EMU's contact time by call: " + ", ".join(f"{k} {v:.2f} s" for k, v in parts.items()) + "\n")
         scene = runs["emu", True]["scene"]
         picks = [0, args.frames // 2, args.frames - 1]
         frames = [runs["emu", False]["positions"][i] for i in picks] + [runs["emu", True]["positions"][i] for i in picks]

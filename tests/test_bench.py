@@ -134,3 +134,13 @@ def test_accuracy_mode_table_small():
     assert resolve.split("(")[1].startswith("2,")          # alpha = 100 mu misses: a re-solve ...
     solves, was_corrected, _, error = corrected.split("(")[1].rstrip(")").split(", ")
     assert solves == "1" and was_corrected == "yes" and float(error) <= 0.01   # ... or one solve, corrected
+
+
+def test_contact_small(tmp_path):
+    out = run(BENCH / "contact.py", "--resolution", "1", "--frames", "4", "--out", tmp_path)
+    rows = [line.split("|") for line in out.splitlines() if line.startswith("| 264 |")]
+    through = {(r[2].strip(), r[3].strip()): r[9].strip() for r in rows}
+    assert through[("fem", "on")] == through[("emu", "on")] == "0 of 4"      # contact stops it
+    assert through[("fem", "off")] != "0 of 4" and through[("emu", "off")] != "0 of 4"
+    assert "default (no FEM correction): 0 of 4 frames FEM-corrected" in out
+    assert (tmp_path / "elbow_wrap_r1.png").stat().st_size > 10000

@@ -225,8 +225,9 @@ class Solver:
                   return its answer corrected by FEM Newton steps (the one the
                   estimate computed and one more, on the estimator's lagged
                   factor) when they converge, instead of re-solving at a larger
-                  alpha (Solution.corrected; docs/DESIGN.md measures both); off for scenes with contact
-                  (those Newton steps know no collision detection)
+                  alpha (Solution.corrected; docs/DESIGN.md measures both). None (default): on,
+                  but off for scenes with contact (those Newton steps know no collision
+                  detection; True forces it)
 
     lagged_factor FEM: Newton-CG preconditioned by the last Cholesky factor, kept
                   across iterations and solves (the frames of a sequence); a
@@ -245,7 +246,7 @@ class Solver:
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
                  lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8,
-                 eigen_filter: str = "clamp", negative_curvature: bool = True, fem_correction: bool = True,
+                 eigen_filter: str = "clamp", negative_curvature: bool = True, fem_correction: bool | None = None,
                  step_fraction: float = STEP_FRACTION):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -337,10 +338,12 @@ class Solver:
         if int(error_estimate_steps) < 1:
             raise ValueError(f"error_estimate_steps must be >= 1, got {error_estimate_steps}")
         self.error_estimate_steps = int(error_estimate_steps)
-        # with contact, not: the corrections are full Newton steps that know no
-        # collision detection, and measured they landed up to 3x the accuracy
-        # away while the estimate itself stayed right (docs/DESIGN.md, "Contact")
-        self.fem_correction = bool(fem_correction) and method == "emu" and self.contact is None
+        # by default not with contact: the corrections are full Newton steps that
+        # know no collision detection, and measured they landed farther than the
+        # accuracy while the estimate itself stayed right (docs/DESIGN.md, "Contact")
+        if fem_correction is None:
+            fem_correction = self.contact is None
+        self.fem_correction = bool(fem_correction) and method == "emu"
         self.settings["fem_correction"] = self.fem_correction
         self._estimator = None       # FEM's Newton system for the error estimate, built at first use
         self._estimator_error = ""   # why there is none (a scene FEM does not handle)
