@@ -330,3 +330,24 @@ def test_scene_file_contact_table(tmp_path):
     f.write_text('[mesh.arm]\nresolution = 2\n[contact]\npairs = [["flexor", "femur"]]\n')
     with pytest.raises(SceneFileError, match="contact: enable_contact: no part named 'femur'"):
         load_scene_file(f)
+
+
+@pytest.mark.parametrize("method", ["fem", "emu"])
+def test_self_contact_stops_a_fold(method):
+    """One U-shaped muscle, its right arm and base pinned, pushed sideways
+    (gravity +x): the free left arm swings into the right one through itself
+    without self-contact, and stops at it with."""
+    points, tets, _ = emu.meshes.block_mesh(
+        {"u": [(0, 0), (0, 1), (0, 2), (0, 3), (1, 0), (2, 0), (2, 1), (2, 2), (2, 3)]}, 2, 0.01)
+    scene = emu.Scene(points, tets)
+    scene.add_muscle("u", np.arange(len(tets)), [0.0, 1.0, 0.0])
+    scene.pin(np.flatnonzero((points[:, 0] >= 0.02 - 1e-9) | (points[:, 1] <= 1e-9)))
+    g = np.array([300.0, 0.0, 0.0])
+    fold = ContactTerm(scene, ContactSettings(pairs=[("u", "u")], self_contact=True))
+    free = emu.solve(scene, method=method, gravity=g)
+    assert free.converged and fold.intersecting(free.positions)
+    scene.enable_contact([("u", "u")], self_contact=True)
+    sol = emu.solve(scene, method=method, gravity=g)
+    assert sol.converged, sol.status
+    assert not fold.intersecting(sol.positions)
+    assert sol.contact["pairs"] > 0 and 0 < sol.contact["min_distance"] < fold.distance
