@@ -438,3 +438,15 @@ def test_recycled_directions_change_cg_not_the_answer():
     assert emu.vertex_error(recycled, plain) < 1e-5
     with pytest.raises(ValueError, match="recycled_directions"):
         emu.Solver(s, "emu", recycled_directions=-1)
+
+
+def test_emu_at_rest_with_bones_converges_at_once():
+    """No load, the rest pose: an exact equilibrium whose gradient is the fit's
+    round-off, lifted by the bones' ACAP weight (1e4) above the scale-based
+    floor; it reported "stalled" after 21 iterations on elbow_wrap r=3 before
+    the measured start floor (EmuSolver::rest_gradient_per_alpha_)."""
+    scene = emu.scenes.elbow_wrap(3)
+    sol = emu.Solver(scene, "emu").solve({"flexor": 0.0})
+    assert sol.converged and sol.iterations == 0, sol.status
+    assert sol.status == "converged: initial state is in equilibrium"
+    assert emu.vertex_error(sol.positions, scene.points) < 1e-12

@@ -1,5 +1,6 @@
 #include "emu/solvers/emu_solver.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -64,6 +65,18 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
     factor_seconds_ += seconds_since(t0);
   }
   tet_energy_.resize(model_.tets.rows());
+  {  // the gradient's round-off at an exact equilibrium (see rest_gradient_per_alpha_)
+    LoadCase rest;
+    rest.activation = Eigen::VectorXd::Zero(model_.num_muscles);
+    const Context c = make_context(rest);
+    const Mat9X F = start_unknowns(nullptr);
+    Eigen::MatrixX3d x;
+    Mat9X Fx, g;
+    fit_into(c, F, x, Fx);
+    gradient_into(c, F, Fx, g);
+    if (layout_.num_bones) project_tangent(F, g);
+    rest_gradient_per_alpha_ = g.norm() / emu_.alpha;
+  }
 }
 
 std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
@@ -717,7 +730,7 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   const Context c = make_context(load);
   Newton newton(*this, c, start_unknowns(F0));
   SolveResult res;
-  newton_minimize(newton, options_, gradient_floor(c), t0, res);
+  newton_minimize(newton, options_, gradient_floor(c), t0, res, 10.0 * rest_gradient_per_alpha_ * emu_.alpha);
   newton.finish(res);
   res.time_s = seconds_since(t0);
   return res;

@@ -140,6 +140,12 @@ class EmuSolver {
   std::unique_ptr<Woodbury> woodbury_;
   std::unique_ptr<SchurPreconditioner> schur_;  // only with EmuPreconditioner::Schur
   double factor_seconds_ = 0, modes_seconds_ = 0;
+  // |g| at the exact rest equilibrium (F = I, no load) per unit alpha: the
+  // round-off of the fit, which the ACAP matrix's conditioning (bone weights
+  // 1e4) lifts above gradient_floor's scale estimate: a start below 10x it is
+  // converged (as a floor for every iterate it stopped the arm at alpha = 1e5 mu
+  // three times farther from FEM: tests/test_error_estimate.py).
+  double rest_gradient_per_alpha_ = 0;
   mutable std::vector<double> tet_energy_;
 };
 

@@ -7,15 +7,18 @@
 // and the gradient norm is at most rtol_grad times the first one
 //   |g_k| <= rtol_grad |g_0|.
 // A gradient below `floor` (a round-off bound from the problem's own scales)
-// counts as zero, which is how an already-converged start stops at once.
+// counts as zero, which is how an already-converged start stops at once; a
+// start also counts as converged below `start_floor` (a problem's measured
+// round-off at an exact equilibrium, which may exceed the scale bound).
 #include <algorithm>
 
 namespace emu {
 
 struct Convergence {
   double rtol_grad, rtol_energy, E0, g0, floor;
+  double start_floor = 0;
   double rel_energy_change = 0;
-  bool initial() const { return g0 <= floor; }
+  bool initial() const { return g0 <= std::max(floor, start_floor); }
   bool test(double E_prev, double E, double g) {
     const double total = E0 - E;
     rel_energy_change = total > 0 ? (E_prev - E) / total : 0.0;

@@ -47,11 +47,14 @@ struct SearchDirection {
 
 /// Minimises the problem from its current iterate; fills every field of res
 /// but positions, F and the neutral modes (the problem's own output).
-/// floor: the round-off level of the gradient norm (see Convergence).
+/// floor: the round-off level of the gradient norm; start_floor: a start
+/// below it is converged (see Convergence).
 template <class Problem>
-void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::time_point t0, SolveResult& res) {
+void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::time_point t0, SolveResult& res,
+                     double start_floor = 0.0) {
   double E = p.energy();
   Convergence conv{o.rtol_grad, o.rtol_energy, E, p.grad_norm(), floor};
+  conv.start_floor = start_floor;
   res.grad_norm0 = conv.g0;
   res.history.push_back({0, E, conv.g0, 0.0, seconds_since(t0), 0, 0});
   res.status = "max iterations reached";
