@@ -144,3 +144,9 @@ def test_contact_small(tmp_path):
     assert through[("fem", "off")] != "0 of 4" and through[("emu", "off")] != "0 of 4"
     assert "default (no FEM correction): 0 of 4 frames FEM-corrected" in out
     assert (tmp_path / "elbow_wrap_r1.png").stat().st_size > 10000
+
+
+def test_sweep_small(tmp_path):
+    pytest.importorskip("dask.distributed")
+    out = run(BENCH / "sweep.py", "--cases", "2", "--resolution", "1", "--frames", "2", "--out", tmp_path)
+    assert "| Dask local cluster, 2 workers" in out and "same answers (last-frame elbow angle) both ways: True" in out

@@ -27,7 +27,7 @@ LAYERS = {
     # files in and out (never the solver)
     "io": {"io", "io.mesh", "io.vtk", "io.obj", "io.plots", "datasets"},
     # the application: command line, scene files, runs, the demo
-    "app": {"app", "app.cli", "app.run", "app.demo", "app.scenefile"},
+    "app": {"app", "app.cli", "app.run", "app.demo", "app.scenefile", "app.sweep"},
     # the public facade and the import paths the README and pyproject.toml name
     "facade": {"", "cli", "run", "scenefile"},
 }

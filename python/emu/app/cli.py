@@ -5,6 +5,7 @@
     emu solve MESH --activation NAME=A [NAME=A ...] [--free-bones BONE ...] [--method emu|fem] [--accuracy E]
               [--out FILE.vtu]
     emu run SCENE.toml [--out DIR] [--accuracy E]
+    emu sweep SWEEP.toml --out DIR [--scheduler ADDRESS] [--workers N] [--threads T]
     emu info [MESH]
     emu data [NAME ...]
 
@@ -200,6 +201,19 @@ def _run(args):
     return 0 if all(f["converged"] for f in log["frames"]) else 1
 
 
+def _sweep(args):
+    from .sweep import sweep
+
+    try:
+        rows = sweep(args.sweep, args.out, scheduler=args.scheduler, workers=args.workers, threads=args.threads)
+    except KeyboardInterrupt:
+        return 130
+    except ImportError as e:
+        print(f"emu: error: {e}", file=sys.stderr)
+        return 2
+    return 0 if all(r["status"] == "done" for r in rows) else 1
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="emu", description="EMU muscle simulation (and its FEM reference)")
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -245,6 +259,16 @@ def main(argv=None):
     r.add_argument("--accuracy", type=float, default=None,
                    help="override the scene file's solver.accuracy (vertex error to FEM wanted, e.g. 0.01)")
     r.set_defaults(func=_run)
+    w = sub.add_parser("sweep", help="run many cases of a scene file (a grid or list of scene-file keys) on "
+                                     "Dask: a local cluster or a scheduler; results.csv, one folder per case")
+    w.add_argument("sweep", help="the sweep file (TOML/JSON): base scene file, [grid] and/or [[cases]]")
+    w.add_argument("--out", required=True, help="output folder (re-running it skips finished cases)")
+    w.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (default: a local "
+                                                     "cluster on this machine)")
+    w.add_argument("--workers", type=int, default=None, help="local workers (default: cores // threads)")
+    w.add_argument("--threads", type=int, default=None, help="solver threads per case (default: the sweep "
+                                                             "file's, 1)")
+    w.set_defaults(func=_sweep)
     i = sub.add_parser("info", help="BLAS, threads; with a mesh or scene file: parts, attachments, defects, "
                                     "memory estimate")
     i.add_argument("mesh", nargs="?", help="a labelled mesh (.vtu, ...) or a scene file (.toml, .json)")
