@@ -74,6 +74,23 @@ def test_two_workers_run_a_sweep_and_record_a_failing_case(tmp_path):
     assert (out / "sweep.png").stat().st_size > 10000
 
 
+def test_activation_curves_and_a_case_list_are_swept(tmp_path):
+    path = write(tmp_path, {"activation.flexor.keys": [[[0.0, 0.0], [1.0, 0.3]], [[0.0, 0.0], [1.0, 0.9]]]})
+    with open(path, "a") as f:
+        f.write('[[cases]]\n"solver.method" = "fem"\n[[cases]]\n"solver.method" = "emu"\n')
+    spec = load_sweep(path)
+    assert len(spec["cases"]) == 4     # the grid times the list
+    out = tmp_path / "out"
+    emu.sweep(path, str(out), workers=2, progress=lambda *a: None)
+    table = list(rows(out).values())
+    assert len(table) == 4 and all(r["status"] == "done" for r in table)
+    angle = {(r["param:activation.flexor.keys"], r["param:solver.method"]): float(r["plot_value"]) for r in table}
+    weak, strong = "[[0.0, 0.0], [1.0, 0.3]]", "[[0.0, 0.0], [1.0, 0.9]]"
+    for method in ("fem", "emu"):
+        assert angle[strong, method] > angle[weak, method] + 1.0     # the curve reached the solve
+    assert abs(angle[strong, "fem"] - angle[strong, "emu"]) < 1.0    # the method did too, same physics
+
+
 def test_an_interrupted_sweep_resumes_without_rerunning_finished_cases(tmp_path):
     path = write(tmp_path, {"solver.alpha": [30.0, 100.0, 300.0, 1000.0]})
     out = tmp_path / "out"
