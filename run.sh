@@ -48,9 +48,9 @@ cpp_tests() {
 }
 
 # the Python tests run under the sanitizers by `bash run.sh sanitize` (the solvers, bones,
-# operators, lagged factor, fuzzing and the stress suite: about 3 minutes)
+# operators, lagged factor, contact, fuzzing and the stress suite: about 5 minutes)
 SANITIZED_TESTS="tests/test_energy.py tests/test_solvers.py tests/test_bones.py tests/test_emu_operators.py
-  tests/test_lagged_factor.py tests/test_fuzz.py tests/stress"
+  tests/test_lagged_factor.py tests/test_contact.py tests/test_fuzz.py tests/stress"
 
 sanitize() {
   # the C++ core, its tests and the extension under AddressSanitizer +
