@@ -15,6 +15,7 @@ estimate; then the same with accuracy mode's FEM correction forced on
 frames with contact off and on.
 
     python bench/contact.py [--resolution 2] [--frames 12] [--threads 1] [--out bench/contact]
+    python bench/contact.py --steps     # EMU's steps with contact on beam_on_bone, against FEM
 """
 from __future__ import annotations
 
@@ -64,14 +65,35 @@ def run(resolution: int, frames: int, method: str, contact: bool, fem_correction
     return out
 
 
+def steps():
+    """Each EMU step (and the Schur preconditioner) on beam_on_bone with contact
+    (gravity pressing the beam onto the bone, alpha = 100 mu), against FEM."""
+    scene = emu.scenes.beam_on_bone()
+    scene.enable_contact()
+    g = np.array([0.0, 0.0, -100.0])
+    ref = emu.solve(scene, method="fem", gravity=g)
+    print("| EMU step | converged | status | iterations (CG) | s | error to FEM | intersecting |")
+    print("|---|---|---|---|---|---|---|")
+    for label, kw in (("newton-krylov", {}), ("newton-krylov, schur", {"preconditioner": "schur"}),
+                      ("lbfgs", {"step": "lbfgs"}), ("woodbury", {"step": "woodbury", "max_iterations": 300})):
+        sol = emu.Solver(scene, "emu", alpha=100.0, error_estimate=False, **kw).solve(gravity=g)
+        print(f"| {label} | {sol.converged} | {sol.status.split(':')[0]} | {sol.iterations} ({sol.cg_iterations}) | "
+              f"{sol.time_s:.2f} | {emu.vertex_error(sol.positions, ref.positions, scene.points):.2e} | "
+              f"{sol.contact['intersecting']} |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--resolution", type=int, nargs="+", default=[2, 3])
     ap.add_argument("--frames", type=int, default=12)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "contact"))
+    ap.add_argument("--steps", action="store_true", help="only the table of EMU's steps with contact")
     args = ap.parse_args()
     start_run(args.threads)
+    if args.steps:
+        steps()
+        return
     os.makedirs(args.out, exist_ok=True)
     print("| tets | method | contact | solve s (+ estimate) | Newton (CG) | contact s | share | contact ms / "
           "Newton | frames through a bone | elbow deg |")
