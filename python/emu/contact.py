@@ -94,7 +94,6 @@ class ContactTerm:
         self._ipctk = ipctk
         names = list(scene.parts)
         pairs = _allowed_pairs(scene, settings)
-        kinds = {n: scene.parts[n].kind for n in names}
         faces, face_tet = boundary_faces(scene.tets, return_tets=True)
         faces = faces.astype(np.int32)
         owner = np.full(len(scene.tets), -1, np.int64)
@@ -151,7 +150,6 @@ class ContactTerm:
             # pairs may touch exactly when their patches differ: ipctk's own filter
             self.mesh.can_collide = ipctk.make_vertex_patches_filter(patch[self.vertex_part].astype(np.int32))
         self.pairs = pairs
-        self.kinds = kinds
         gap = self._rest_gap(scene.points, self.distance)
         if gap < self.distance:
             if settings.distance is None:
@@ -295,6 +293,22 @@ def _patches(allowed: np.ndarray, present: np.ndarray):
     return patch
 
 
+def check_pairs(names, pairs, self_contact: bool, where: str) -> list:
+    """The pairs [(part, part)] as tuples; ValueError (prefixed ``where``) for a
+    pair that is not two of ``names``, or a self pair without self_contact."""
+    out = []
+    for pair in pairs:
+        if not isinstance(pair, (tuple, list)) or len(pair) != 2:
+            raise ValueError(f"{where}: each pair names two parts, got {pair!r}")
+        for name in pair:
+            if name not in names:
+                raise ValueError(f"{where}: no part named '{name}' (parts: {', '.join(names)})")
+        if pair[0] == pair[1] and not self_contact:
+            raise ValueError(f"{where}: the pair ({pair[0]!r}, {pair[1]!r}) is self-contact; pass self_contact=True")
+        out.append(tuple(pair))
+    return out
+
+
 def _allowed_pairs(scene, settings: ContactSettings) -> list:
     names = list(scene.parts)
     if settings.pairs is None:
@@ -303,17 +317,7 @@ def _allowed_pairs(scene, settings: ContactSettings) -> list:
         if settings.self_contact:
             pairs += [(a, a) for a in names if scene.parts[a].kind != "bone"]
     else:
-        pairs = []
-        for pair in settings.pairs:
-            if len(pair) != 2:
-                raise ValueError(f"contact: each pair names two parts, got {pair!r}")
-            a, b = pair
-            for name in (a, b):
-                if name not in scene.parts:
-                    raise ValueError(f"contact: no part named '{name}' (parts: {', '.join(names)})")
-            if a == b and not settings.self_contact:
-                raise ValueError(f"contact: the pair ({a!r}, {b!r}) is self-contact; pass self_contact=True")
-            pairs.append((a, b))
+        pairs = check_pairs(names, settings.pairs, settings.self_contact, "contact")
     if not pairs:
         raise ValueError("contact: no pair of parts can touch (the scene has one part, or bones only); "
                          "name pairs, or pass self_contact=True")

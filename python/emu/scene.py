@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 
 from .checks import check_anchored, check_mesh, check_movable_bones, integer_ids
-from .contact import ContactSettings
+from .contact import ContactSettings, check_pairs
 from .fibers import attachment_fibers, attachments, laplace_fibers
 from .joints import declare_joint, detect_joints
 from .parts import BONE_ACAP_WEIGHT, Part, default_tendon_weight, lame
@@ -253,20 +253,12 @@ class Scene:
         Scenes without it build nothing for contact. Returns the settings
         (also ``scene.contact``; ``scene.contact = None`` switches it off).
         """
-        names = list(self.parts)
-        for pair in pairs or []:
-            if not isinstance(pair, (tuple, list)) or len(pair) != 2:
-                raise ValueError(f"enable_contact: each pair names two parts, got {pair!r}")
-            for name in pair:
-                if name not in self.parts:
-                    raise ValueError(f"enable_contact: no part named '{name}' (parts: {', '.join(names)})")
-            if pair[0] == pair[1] and not self_contact:
-                raise ValueError(f"enable_contact: ({pair[0]!r}, {pair[1]!r}) is self-contact; "
-                                 "pass self_contact=True")
+        if pairs is not None:
+            pairs = check_pairs(list(self.parts), pairs, self_contact, "enable_contact")
         for name, v in (("distance", distance), ("stiffness", stiffness)):
             if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
                 raise ValueError(f"enable_contact: {name} must be a positive number, got {v!r}")
-        self.contact = ContactSettings(pairs=None if pairs is None else [tuple(p) for p in pairs],
+        self.contact = ContactSettings(pairs=pairs,
                                        self_contact=bool(self_contact),
                                        distance=None if distance is None else float(distance),
                                        stiffness=None if stiffness is None else float(stiffness))

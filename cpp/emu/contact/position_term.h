@@ -5,7 +5,9 @@
 // The solvers call it from serial code only (never inside an OpenMP region),
 // so a callback may take the Python GIL and may throw; the exception leaves
 // the solve.
+#include <cmath>
 #include <functional>
+#include <stdexcept>
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
@@ -28,6 +30,30 @@ struct PositionTerm {
   std::function<void(const Eigen::MatrixX3d& x)> check_start;
 
   bool active() const { return static_cast<bool>(energy); }
+
+  // What both solvers call: the callbacks with their results checked.
+  /// gradient(x), required finite and #V by 3.
+  Eigen::MatrixX3d checked_gradient(const Eigen::MatrixX3d& x) const {
+    Eigen::MatrixX3d g = gradient(x);
+    if (g.rows() != x.rows() || !g.allFinite()) throw std::runtime_error("the contact gradient must be finite and #V by 3");
+    return g;
+  }
+  /// hessian(x), required 3 #V by 3 #V, compressed.
+  Eigen::SparseMatrix<double> checked_hessian(const Eigen::MatrixX3d& x) const {
+    Eigen::SparseMatrix<double> H = hessian(x);
+    const Eigen::Index n3 = 3 * x.rows();
+    if (H.rows() != n3 || H.cols() != n3) throw std::runtime_error("the contact Hessian must be 3 #V by 3 #V");
+    H.makeCompressed();
+    return H;
+  }
+  /// A solve's start: check_start(x) where given, then its total energy E must be finite.
+  void check_start_state(const Eigen::MatrixX3d& x, double E) const {
+    if (check_start) check_start(x);
+    if (!std::isfinite(E))
+      throw std::invalid_argument(
+          "the start state has a non-finite energy: with contact, surfaces that touch or intersect (move "
+          "the pins or bones in smaller steps between solves, or start from positions without contact)");
+  }
 };
 
 }  // namespace emu

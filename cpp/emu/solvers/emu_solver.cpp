@@ -124,13 +124,7 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   c.has_gravity = load.gravity.squaredNorm() > 0;
   if (c.has_gravity) {
     // d W(x*(F)) / dF = C^T K_c^-1 S^T f: one constant solve per load.
-    Eigen::MatrixX3d R;
-    acap_->reduce_vertex(f, R);
-    Eigen::MatrixXd Z;
-    acap_->solve(Eigen::MatrixXd(R), Z);
-    Eigen::MatrixX3d yfull = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
-    acap_->expand(Eigen::MatrixX3d(Z), yfull);
-    deformation_gradients(layout_, model_.tets, yfull, c.F_gravity);
+    force_fit(f, c.F_gravity);
   }
   return c;
 }
@@ -292,16 +286,19 @@ Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
   return rows.transpose();
 }
 
-void EmuSolver::position_force_to_unknowns(const Eigen::MatrixX3d& f, Mat9X& out) const {
-  // As the gravity term's constant solve (make_context): S^T f, K_c^-1, S, F_t, w_t V_t.
+void EmuSolver::force_fit(const Eigen::MatrixX3d& f, Mat9X& out) const {
   Eigen::MatrixX3d R;
   acap_->reduce_vertex(f, R);
   Eigen::MatrixXd Z;
   acap_->solve(Eigen::MatrixXd(R), Z);
   Eigen::MatrixX3d y = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
   acap_->expand(Eigen::MatrixX3d(Z), y);
+  deformation_gradients(layout_, model_.tets, y, out);
+}
+
+void EmuSolver::position_force_to_unknowns(const Eigen::MatrixX3d& f, Mat9X& out) const {
   Mat9X per_tet;
-  deformation_gradients(layout_, model_.tets, y, per_tet);
+  force_fit(f, per_tet);
   const auto& wv = acap_->weight_volume();
   for (Eigen::Index t = 0; t < per_tet.cols(); ++t) per_tet.col(t) *= wv(t);
   reduce_to_unknowns(layout_, per_tet, out);
@@ -309,8 +306,7 @@ void EmuSolver::position_force_to_unknowns(const Eigen::MatrixX3d& f, Mat9X& out
 
 void EmuSolver::add_contact_gradient(const Eigen::MatrixX3d& x, Mat9X& g) const {
   if (!has_contact()) return;
-  const Eigen::MatrixX3d gx = options_.contact.gradient(x);
-  if (gx.rows() != x.rows() || !gx.allFinite()) throw std::runtime_error("the contact gradient must be finite and #V by 3");
+  const Eigen::MatrixX3d gx = options_.contact.checked_gradient(x);
   if (gx.isZero(0.0)) return;
   Mat9X gF;
   position_force_to_unknowns(gx, gF);
@@ -374,7 +370,7 @@ Eigen::MatrixXd EmuSolver::hessian_product(const LoadCase& load, const Eigen::Ma
     Eigen::MatrixX3d x;
     Mat9X Fx;
     fit_into(c, F, x, Fx);
-    add_position_hessian_product(options_.contact.hessian(x), V, out);
+    add_position_hessian_product(options_.contact.checked_hessian(x), V, out);
   }
   return out.transpose();
 }
@@ -466,12 +462,8 @@ class EmuSolver::Newton {
   Newton(EmuSolver& s, const Context& c, Mat9X F)
       : s_(s), c_(c), bones_(s.layout_.num_bones > 0), F_(std::move(F)), coarse_(s.layout_, s.emu_.alpha) {
     s_.fit_into(c_, F_, x_, Fx_);
-    if (s_.has_contact() && s_.options_.contact.check_start) s_.options_.contact.check_start(x_);
     E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_) + s_.contact_energy(x_);
-    if (!std::isfinite(E_))
-      throw std::invalid_argument(
-          "the start state has a non-finite energy: with contact, surfaces that touch or intersect (move "
-          "the pins or bones in smaller steps between solves, or start from positions without contact)");
+    if (s_.has_contact()) s_.options_.contact.check_start_state(x_, E_);
     update_gradient();
   }
 
@@ -515,9 +507,7 @@ class EmuSolver::Newton {
     const std::vector<Mat9>& H = exact ? A_exact_ : A_;
     if (s_.has_contact()) {
       ScopedSeconds timer(time.hessian);
-      Hc_ = s_.options_.contact.hessian(x_);
-      const Eigen::Index n3 = 3 * x_.rows();
-      if (Hc_.rows() != n3 || Hc_.cols() != n3) throw std::runtime_error("the contact Hessian must be 3 #V by 3 #V");
+      Hc_ = s_.options_.contact.checked_hessian(x_);
     }
     // Contact's curvature J^T H_c J enters the products (the preconditioner
     // leaves it out); with bones its bone columns are projected like the rest.

@@ -125,6 +125,9 @@ class EmuSolver {
   //   Hessian J^T H_c J with J = dx*/dF = S K_c^-1 C (two per product).
   bool has_contact() const { return options_.contact.active(); }
   double contact_energy(const Eigen::MatrixX3d& x) const { return has_contact() ? options_.contact.energy(x) : 0.0; }
+  /// out (9 x #T) = F_t(S K_c^-1 S^T f) for vertex forces f (#V by 3): the fit of
+  /// the forces (one back-substitution); w_t V_t times it is C^T K_c^-1 S^T f.
+  void force_fit(const Eigen::MatrixX3d& f, Mat9X& out) const;
   /// out (9 x #unknowns) = J^T f for vertex forces f (#V by 3): C^T K_c^-1 S^T f per tet, summed per unknown.
   void position_force_to_unknowns(const Eigen::MatrixX3d& f, Mat9X& out) const;
   /// g += dE_c/dF at the fit x.

@@ -132,19 +132,11 @@ double FemSolver::contact_energy(const Eigen::MatrixX3d& x) const {
 }
 
 Eigen::MatrixX3d FemSolver::contact_gradient(const Eigen::MatrixX3d& x) const {
-  if (!has_contact()) return Eigen::MatrixX3d::Zero(x.rows(), 3);
-  Eigen::MatrixX3d g = options_.contact.gradient(x);
-  if (g.rows() != x.rows() || !g.allFinite())
-    throw std::runtime_error("the contact gradient must be finite and #V by 3");
-  return g;
+  return has_contact() ? options_.contact.checked_gradient(x) : Eigen::MatrixX3d::Zero(x.rows(), 3);
 }
 
 void FemSolver::set_contact_hessian(const Eigen::MatrixX3d& x) {
-  const Eigen::Index n3 = 3 * x.rows();
-  contact_H_ = options_.contact.hessian(x);
-  if (contact_H_.rows() != n3 || contact_H_.cols() != n3)
-    throw std::runtime_error("the contact Hessian must be 3 #V by 3 #V");
-  contact_H_.makeCompressed();
+  contact_H_ = options_.contact.checked_hessian(x);
   // Its free-vertex block in the soft rows, upper triangle (as values_ holds K).
   std::vector<Eigen::Triplet<double>> upper;
   for (int j = 0; j < contact_H_.outerSize(); ++j) {
@@ -224,12 +216,8 @@ class FemSolver::Newton {
     }
     poses_ = s_.bones_.begin(load_, x_, initial);
     s_.bones_.place(poses_, x_);
-    if (s_.has_contact() && s_.options_.contact.check_start) s_.options_.contact.check_start(x_);
     E_ = s_.energy_with(x_, act_, load_.gravity) + s_.bones_.spring_energy(poses_) + s_.contact_energy(x_);
-    if (!std::isfinite(E_))
-      throw std::invalid_argument(
-          "the start state has a non-finite energy: with contact, surfaces that touch or intersect (move "
-          "the pins or bones in smaller steps between solves, or start from positions without contact)");
+    if (s_.has_contact()) s_.options_.contact.check_start_state(x_, E_);
     reduced_gradient(x_, poses_, gs_, gb_);
     gn_ = s_.bones_.gradient_norm(gs_.squaredNorm(), gb_);
     g0_ = gn_;
