@@ -474,3 +474,43 @@ def test_schur_preconditioner_is_the_exact_inverse_of_the_filtered_hessian(eps):
     sol = filtered.solve({"belly": 5e4})
     assert sol.converged, sol.status
     assert sol.cg_iterations <= sol.iterations + 2
+
+
+@pytest.mark.parametrize("alpha", [30.0, 300.0])
+@pytest.mark.parametrize("eps", [0.0, 0.2])
+def test_constant_schur_preconditioner_against_numpy(eps, alpha):
+    """preconditioner='constant-schur' applies M^-1 = A^-1 + alpha A^-1 C^T S0^-1 C A^-1
+    with the constant S0 = G_f^T diag(e) G_f, e_t = w_t V_t h_t / (h_t + alpha w_t),
+    h_t = mu_t + lambda_t / 3 (built here in numpy): the same vectors; M^-1 is
+    symmetric positive definite; and, as for any block factorisation with an
+    approximate Schur complement, the eigenvalues of M^-1 H lie between
+    min(1, eig(S0^-1 S)) and max(1, eig(S0^-1 S)), S = K - alpha C A^-1 C^T.
+    A new alpha refactorises S0 (the weights change)."""
+    s, _ = small_scene(2)
+    solver = emu.Solver(s, "emu", alpha=100.0, preconditioner="constant-schur")
+    core = solver._core
+    core.alpha = alpha * solver.mu_ref
+    R = Reference(solver)
+    load = solver.load_case({"belly": 5e4})
+    F = perturbed(R.m, eps, 23)
+    A = R.blocks(load, F)
+    w = R.wv / R.vol
+    h = R.mu + R.lam / 3
+    e = R.wv * h / (h + R.alpha * w)
+    S0 = R.Gf.T @ (np.repeat(e, 9)[:, None] * R.Gf)
+    Ainv = sl.block_diag(*np.linalg.inv(A))
+    Minv = Ainv + R.alpha * Ainv @ R.C.T @ sl.solve(S0, R.C @ Ainv, assume_a="pos")
+    Rhs = np.random.default_rng(24).standard_normal((R.m, 9))
+    got = core.constant_schur_solve(load, F, Rhs)
+    want = (Minv @ Rhs.ravel()).reshape(-1, 9)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-8 * np.abs(want).max())
+    np.testing.assert_allclose(Minv, Minv.T, rtol=0, atol=1e-9 * np.abs(Minv).max())
+    assert np.linalg.eigvalsh(0.5 * (Minv + Minv.T)).min() > 0
+    H = R.hessian(A)
+    S = R.K - R.alpha * R.C @ Ainv @ R.C.T
+    s_eig = sl.eigh(0.5 * (S + S.T), S0, eigvals_only=True)
+    lo, hi = min(1.0, s_eig.min()), max(1.0, s_eig.max())
+    ev = np.sort(np.linalg.eigvals(Minv @ H).real)
+    assert ev.min() >= lo * (1 - 1e-6) and ev.max() <= hi * (1 + 1e-6), (ev.min(), ev.max(), lo, hi)
+    with pytest.raises(ValueError, match="preconditioner='constant-schur'"):
+        emu.Solver(s, "emu", alpha=100.0)._core.constant_schur_solve(load, F, Rhs)

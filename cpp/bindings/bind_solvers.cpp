@@ -169,7 +169,8 @@ void bind_solvers(py::module_& m) {
 
   py::enum_<EmuPreconditioner>(m, "EmuPreconditioner")
       .value("woodbury", EmuPreconditioner::Woodbury)
-      .value("schur", EmuPreconditioner::Schur);
+      .value("schur", EmuPreconditioner::Schur)
+      .value("constant_schur", EmuPreconditioner::ConstantSchur);
 
   py::class_<EmuOptions>(m, "EmuOptions")
       .def(py::init<>())
@@ -296,6 +297,8 @@ void bind_solvers(py::module_& m) {
            py::arg("exact") = false, gil())
       .def("woodbury_solve", &EmuSolver::woodbury_solve, py::arg("load"), py::arg("F"), py::arg("R"), gil())
       .def("schur_solve", &EmuSolver::schur_solve, py::arg("load"), py::arg("F"), py::arg("R"), gil())
+      .def("constant_schur_solve", &EmuSolver::constant_schur_solve, py::arg("load"), py::arg("F"), py::arg("R"),
+           gil())
       .def("block_hessians", &EmuSolver::block_hessians, py::arg("load"), py::arg("F"), py::arg("exact") = false,
            gil())
       .def("mode_matrix", &EmuSolver::mode_matrix)

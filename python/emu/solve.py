@@ -33,6 +33,7 @@ METHODS = ("emu", "fem")
 STEPS = ("newton-krylov", "woodbury", "lbfgs")
 # how the PSD-filtered element Hessian treats a negative eigenvalue (SolverOptions::eigen_filter order)
 EIGEN_FILTERS = ("clamp", "abs")
+PRECONDITIONERS = ("woodbury", "schur", "constant-schur")
 # accuracy= (EMU): accept a solve whose error estimate is within ACCEPT x the
 # target (the estimate was measured at 0.65-1.35 x the true error), aim new
 # alphas at AIM x the target; stop iterating when a full step moves no vertex
@@ -320,9 +321,9 @@ class Solver:
             if int(preconditioner_refresh) < 1:
                 raise ValueError(f"preconditioner_refresh must be >= 1, got {preconditioner_refresh}")
             eo.preconditioner_refresh = int(preconditioner_refresh)
-            if preconditioner not in ("woodbury", "schur"):
-                raise ValueError(f"preconditioner must be 'woodbury' or 'schur', got {preconditioner!r}")
-            eo.preconditioner = getattr(_core.EmuPreconditioner, preconditioner)
+            if preconditioner not in PRECONDITIONERS:
+                raise ValueError(f"preconditioner must be one of {PRECONDITIONERS}, got {preconditioner!r}")
+            eo.preconditioner = getattr(_core.EmuPreconditioner, preconditioner.replace("-", "_"))
             eo.bone_coarse_space = bool(bone_coarse_space)
             if int(recycled_directions) < 0:
                 raise ValueError(f"recycled_directions must be >= 0, got {recycled_directions}")

@@ -15,6 +15,12 @@ void record_error(int status, const char* /*file*/, int /*line*/, const char* me
 CholmodFactor::CholmodFactor() {
   cholmod_start(&common_);
   common_.supernodal = CHOLMOD_SUPERNODAL;
+  // Orderings tried: AMD and METIS, the one with less fill kept. By default
+  // CHOLMOD tries METIS only where AMD's flops per factor entry exceed 500; the
+  // ACAP matrix of a compact 3D mesh stays under that while METIS's nested
+  // dissection fills 24% less (81k-tet fusiform: 3.29M against 4.32M entries,
+  // a fit 18 against 20 ms; FEM's 3n matrix keeps AMD's ordering, 28M both).
+  common_.nmethods = 3;
   common_.print = 0;
   common_.error_handler = record_error;
 }
@@ -51,6 +57,20 @@ void CholmodFactor::analyze(int n, const int* col_ptr, const int* row_index) {
   L_ = cholmod_analyze(A_, &common_);
   check("analyze");
   if (!L_) throw std::runtime_error("CHOLMOD analysis failed (out of memory?)");
+}
+
+void CholmodFactor::analyze_like(const CholmodFactor& other) {
+  if (L_) cholmod_free_factor(&L_, &common_);
+  if (A_) cholmod_free_sparse(&A_, &common_);
+  factorized_ = false;
+  n_ = other.n_;
+  if (n_ == 0) return;
+  if (!other.A_ || !other.L_) throw std::logic_error("CholmodFactor::analyze_like of a factor not analysed");
+  A_ = cholmod_copy_sparse(other.A_, &common_);
+  check("copy");
+  L_ = cholmod_copy_factor(other.L_, &common_);
+  check("copy");
+  if (!A_ || !L_) throw std::runtime_error("CHOLMOD could not copy the factor (out of memory?)");
 }
 
 bool CholmodFactor::factorize(const double* values) {

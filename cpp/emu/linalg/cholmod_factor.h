@@ -19,6 +19,10 @@ class CholmodFactor {
   /// in compressed-column form (sorted row indices).
   void analyze(int n, const int* col_ptr, const int* row_index);
 
+  /// The pattern and symbolic analysis of another factor (no new ordering):
+  /// for a second matrix with the same pattern.
+  void analyze_like(const CholmodFactor& other);
+
   /// Numeric factorisation with the analysed pattern. values: nnz doubles in the
   /// order of row_index. Returns false if the matrix is not positive definite.
   bool factorize(const double* values);

@@ -56,14 +56,17 @@ Eigen::Vector4d phi_of(const Model& model, const UnknownLayout& layout, int v, i
 }
 }  // namespace
 
-AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout)
+AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd* weight_volume,
+                           const AcapOperator* pattern_of)
     : model_(model), layout_(layout), pattern_(model.tets, layout.free_index, layout.num_free, 1) {
   const Eigen::Index m = model.tets.rows();
   ns_ = layout.num_free;
   nq_ = 4 * layout.num_bones;
   if (ns_ == 0)
     throw std::invalid_argument("the model has no free soft vertex: every vertex is pinned or on a bone");
-  wv_ = model.acap_weight.cwiseProduct(layout.geometry.volume);
+  if (weight_volume && weight_volume->size() != m)
+    throw std::invalid_argument("AcapOperator: one weight per tet expected");
+  wv_ = weight_volume ? *weight_volume : Eigen::VectorXd(model.acap_weight.cwiseProduct(layout.geometry.volume));
   std::vector<double> element(m * 16);
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
@@ -72,7 +75,8 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout)
   }
   std::vector<double> values(pattern_.nnz());
   pattern_.assemble(element.data(), values.data());
-  factor_.analyze(pattern_.rows(), pattern_.col_ptr().data(), pattern_.row_index().data());
+  if (pattern_of) factor_.analyze_like(pattern_of->factor_);
+  else factor_.analyze(pattern_.rows(), pattern_.col_ptr().data(), pattern_.row_index().data());
   if (!factor_.factorize(values.data()))
     throw std::invalid_argument(
         "the ACAP matrix is singular: some part of the mesh is not connected to a pinned vertex, "

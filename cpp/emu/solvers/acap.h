@@ -48,7 +48,11 @@ void reduce_to_unknowns(const UnknownLayout& layout, Mat9X& per_tet, Mat9X& out)
 
 class AcapOperator {
  public:
-  AcapOperator(const Model& model, const UnknownLayout& layout);
+  /// weight_volume  #T per-tet weights of the fit (nullptr: the ACAP weights
+  ///                w_t V_t; ConstantSchur builds the same operator with others)
+  /// pattern_of     an operator of the same model whose symbolic analysis is reused (nullptr: analyse)
+  AcapOperator(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd* weight_volume = nullptr,
+               const AcapOperator* pattern_of = nullptr);
 
   /// Number of scalar position unknowns per coordinate: num_free + 4 #bones.
   int dofs() const { return ns_ + nq_; }

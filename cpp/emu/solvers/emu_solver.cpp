@@ -44,8 +44,10 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   t0 = Clock::now();
   // Modes only where the Woodbury approximation is used (section 7: leave out
   // what the solve does not need).
-  const bool schur = emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur;
-  const int ks = schur ? 0 : (emu_.modes + 2) / 3;
+  const bool krylov = emu_.step == EmuStep::NewtonKrylov;
+  const bool schur = krylov && emu_.preconditioner == EmuPreconditioner::Schur;
+  const bool constant_schur = krylov && emu_.preconditioner == EmuPreconditioner::ConstantSchur;
+  const int ks = schur || constant_schur ? 0 : (emu_.modes + 2) / 3;
   const Modes modes =
       acap_->has_bones()
           ? lowest_modes_of_inverse(acap_->dofs(),
@@ -62,6 +64,11 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   if (schur) {
     t0 = Clock::now();
     schur_ = std::make_unique<SchurPreconditioner>(model_, layout_, *acap_, emu_.alpha);
+    factor_seconds_ += seconds_since(t0);
+  }
+  if (constant_schur) {
+    t0 = Clock::now();
+    constant_schur_ = std::make_unique<ConstantSchur>(model_, layout_, *acap_, emu_.alpha);
     factor_seconds_ += seconds_since(t0);
   }
   tet_energy_.resize(model_.tets.rows());
@@ -83,8 +90,9 @@ std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
   std::vector<std::pair<std::string, double>> out;
   out.emplace_back("ACAP factor", 8.0 * acap_->factor().factor_nnz());
   if (woodbury_->k() > 0) out.emplace_back("ACAP modes", woodbury_->mode_bytes());
-  if (!schur_) out.emplace_back("Woodbury block inverses", woodbury_->block_bytes());
+  if (!schur_ && !constant_schur_) out.emplace_back("Woodbury block inverses", woodbury_->block_bytes());
   if (schur_) out.emplace_back("Schur preconditioner", schur_->bytes());
+  if (constant_schur_) out.emplace_back("constant Schur preconditioner", constant_schur_->bytes());
   if (layout_.num_bones && emu_.bone_coarse_space) {
     // Z and H Z: 3 turns per bone and the recycled directions (at most) over
     // all unknowns, rebuilt every Newton step
@@ -100,6 +108,7 @@ void EmuSolver::set_alpha(double alpha) {
   emu_.alpha = alpha;
   woodbury_->set_alpha(alpha);
   if (schur_) schur_->set_alpha(alpha);
+  if (constant_schur_) constant_schur_->set_alpha(alpha);
 }
 
 void EmuSolver::set_cg_forcing_max(double eta_max) {
@@ -399,6 +408,20 @@ Eigen::MatrixXd EmuSolver::schur_solve(const LoadCase& load, const Eigen::Matrix
   return out.transpose();
 }
 
+Eigen::MatrixXd EmuSolver::constant_schur_solve(const LoadCase& load, const Eigen::MatrixXd& Frows,
+                                                const Eigen::MatrixXd& Rrows) {
+  if (!constant_schur_)
+    throw std::invalid_argument(
+        "this solver has no constant Schur preconditioner (preconditioner='constant-schur')");
+  const Context c = make_context(load);
+  std::vector<Mat9> A;
+  blocks_into(c, to_cols(Frows), &A, nullptr);
+  if (!constant_schur_->update(A)) throw std::runtime_error("a filtered Hessian block is not positive definite");
+  Mat9X out;
+  constant_schur_->apply(to_cols(Rrows), out);
+  return out.transpose();
+}
+
 Eigen::MatrixXd EmuSolver::block_hessians(const LoadCase& load, const Eigen::MatrixXd& Frows, bool exact) const {
   const Context c = make_context(load);
   std::vector<Mat9> A_filtered, A_exact;
@@ -450,6 +473,7 @@ Mat9X EmuSolver::start_unknowns(const Eigen::MatrixXd* F0) const {
 
 void EmuSolver::base_precondition(const Mat9X& F, const Mat9X& in, Mat9X& out) const {
   if (schur_) schur_->apply(in, out);
+  else if (constant_schur_) constant_schur_->apply(in, out);
   else woodbury_->apply(in, out);
   if (layout_.num_bones) project_tangent(F, out);
 }
@@ -495,6 +519,8 @@ class EmuSolver::Newton {
       if (s_.schur_) {
         ++dir.factorizations;
         if (!s_.schur_->update(A_)) return dir.fail("Schur-complement preconditioner could not be factorised");
+      } else if (s_.constant_schur_) {
+        if (!s_.constant_schur_->update(A_)) return dir.fail("a filtered Hessian block is not positive definite");
       } else {
         s_.woodbury_->update(A_);
       }

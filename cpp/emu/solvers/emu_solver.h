@@ -31,6 +31,7 @@
 #include "emu/linalg/modes.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
+#include "emu/solvers/constant_schur.h"
 #include "emu/solvers/newton/result.h"
 #include "emu/solvers/solver_options.h"
 #include "emu/solvers/schur_preconditioner.h"
@@ -66,6 +67,9 @@ class EmuSolver {
   /// filtered Hessian); only for a solver built with preconditioner = Schur.
   /// Refactorises the preconditioner at F (each solve rebuilds it at its start).
   Eigen::MatrixXd schur_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R);
+  /// M^-1 R through the constant Schur complement S0 (constant_schur.h); only for
+  /// a solver built with preconditioner = ConstantSchur. Blocks A_u at F.
+  Eigen::MatrixXd constant_schur_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R);
   /// Blocks A_u, #unknowns by 81 (column-major 9x9 per row); filtered unless exact.
   Eigen::MatrixXd block_hessians(const LoadCase& load, const Eigen::MatrixXd& F, bool exact = false) const;
   Eigen::MatrixXd mode_matrix() const { return woodbury_->dense_B(); }
@@ -142,6 +146,7 @@ class EmuSolver {
   std::unique_ptr<AcapOperator> acap_;
   std::unique_ptr<Woodbury> woodbury_;
   std::unique_ptr<SchurPreconditioner> schur_;  // only with EmuPreconditioner::Schur
+  std::unique_ptr<ConstantSchur> constant_schur_;  // only with EmuPreconditioner::ConstantSchur
   double factor_seconds_ = 0, modes_seconds_ = 0;
   // |g| at the exact rest equilibrium (F = I, no load) per unit alpha: the
   // round-off of the fit, which the ACAP matrix's conditioning (bone weights

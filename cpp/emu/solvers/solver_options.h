@@ -58,9 +58,11 @@ struct SolverOptions {
 // the exact Hessian), or L-BFGS with the Woodbury step as its initial inverse.
 enum class EmuStep { Woodbury, NewtonKrylov, Lbfgs };
 // Newton-Krylov preconditioner: the paper's Woodbury approximation (no
-// factorisation after setup), or the exact inverse through the position-space
-// Schur complement (a factorisation per lagged rebuild).
-enum class EmuPreconditioner { Woodbury, Schur };
+// factorisation after setup), the exact inverse through the position-space
+// Schur complement (a factorisation per lagged rebuild), or that inverse with
+// the Schur complement replaced by a constant matrix (constant_schur.h; no
+// factorisation after setup but one per new alpha).
+enum class EmuPreconditioner { Woodbury, Schur, ConstantSchur };
 
 struct EmuOptions {
   double alpha = 0.0;      // absolute ACAP stiffness (Python passes alpha_rel * mu_ref)

@@ -1,0 +1,63 @@
+#pragma once
+// Newton-Krylov's preconditioner from a constant Schur complement: the exact
+// inverse of the (filtered) EMU Hessian through its position-space Schur
+// complement (schur_preconditioner.h),
+//   H^-1 r = A^-1 r + alpha A^-1 C^T S^-1 C A^-1 r,
+//   S = K - alpha C A^-1 C^T = sum_t G_t^T E_t G_t,  E_t = w V (I - alpha w V A_t^-1),
+// with S replaced by a constant matrix of the ACAP matrix's form. A soft tet's
+// block A_t = V H_t + alpha w V I gives E_t the eigenvalues
+//   w V h / (h + alpha w)        for each curvature h of its material,
+// so S0 takes one scalar curvature per tet, h_t = mu_t + lambda_t / 3 (between
+// its shear and volume curvatures):
+//   S0 = L_e (x) I_3,  L_e = sum_t e_t b b^T,  e_t = w_t V_t h_t / (h_t + alpha w_t).
+// A movable bone's tets add nothing to S on the affine maps its fit allows
+// (their rows cancel exactly), so they get a token weight that only keeps a
+// loosely attached bone's block regular. S0 is factorised once per alpha (an
+// AcapOperator with these weights: the pattern of L, a ninth of FEM's factor
+// entries), never per Newton step; a rebuild only inverts the 9x9 blocks.
+// The preconditioned eigenvalues are 1 and those of S0^-1 S: how well one
+// scalar per tet stands for the material's curvatures (nearly incompressible
+// tissue: lambda ~ 25 mu), independent of the mesh size, where the Woodbury
+// approximation's k modes cover a shrinking share of the spectrum as the mesh
+// grows (docs/DESIGN.md: measured).
+#include <memory>
+#include <vector>
+
+#include "emu/model/unknown_layout.h"
+#include "emu/solvers/acap.h"
+
+namespace emu {
+
+class ConstantSchur {
+ public:
+  ConstantSchur(const Model& model, const UnknownLayout& layout, const AcapOperator& acap, double alpha);
+
+  /// Invert the SPD blocks A_u (one per unknown). False if one is not SPD
+  /// (apply() then returns r unchanged).
+  bool update(const std::vector<Mat9>& A);
+
+  /// out = M^-1 r; r, out are 9 x #unknowns.
+  void apply(const Mat9X& r, Mat9X& out) const;
+
+  /// A new alpha: S0's weights change, so it is factorised again (numerically).
+  void set_alpha(double alpha);
+
+  /// Per-tet weights e_t of S0 (#T).
+  static Eigen::VectorXd weights(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd& wv,
+                                 double alpha);
+
+  double factor_nnz() const { return s0_->factor().factor_nnz(); }
+  /// Bytes held: S0's factor and the block inverses.
+  double bytes() const { return 8.0 * factor_nnz() + sizeof(Mat9) * double(Ainv_.size()); }
+
+ private:
+  const Model& model_;
+  const UnknownLayout& layout_;
+  const AcapOperator& acap_;
+  double alpha_;
+  std::unique_ptr<AcapOperator> s0_;
+  std::vector<Mat9> Ainv_;
+  bool ok_ = false;
+};
+
+}  // namespace emu
