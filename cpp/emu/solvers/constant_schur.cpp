@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 
 namespace emu {
 
@@ -10,18 +9,14 @@ Eigen::VectorXd ConstantSchur::weights(const Model& model, const UnknownLayout& 
                                        double alpha) {
   const Eigen::Index m = model.tets.rows();
   Eigen::VectorXd e(m);
-  double soft_min = std::numeric_limits<double>::infinity();  // smallest e_t / V_t of a soft tet
   for (Eigen::Index t = 0; t < m; ++t) {
-    if (layout.is_bone_tet(t)) continue;
+    if (layout.is_bone_tet(t)) {  // infinitely stiff: the limit h -> infinity
+      e(t) = wv(t);
+      continue;
+    }
     const double h = model.mu(t) + model.lambda(t) / 3.0;
-    const double w = model.acap_weight(t);
-    e(t) = wv(t) * h / (h + alpha * w);
-    soft_min = std::min(soft_min, e(t) / layout.geometry.volume(t));
+    e(t) = wv(t) * h / (h + alpha * model.acap_weight(t));
   }
-  if (!std::isfinite(soft_min)) soft_min = 1.0;
-  // a bone's tets: exactly nothing in S; a token 1e-3 of the softest tissue
-  for (Eigen::Index t = 0; t < m; ++t)
-    if (layout.is_bone_tet(t)) e(t) = 1e-3 * soft_min * layout.geometry.volume(t);
   return e;
 }
 

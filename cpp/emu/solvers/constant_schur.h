@@ -10,9 +10,11 @@
 // so S0 takes one scalar curvature per tet, h_t = mu_t + lambda_t / 3 (between
 // its shear and volume curvatures):
 //   S0 = L_e (x) I_3,  L_e = sum_t e_t b b^T,  e_t = w_t V_t h_t / (h_t + alpha w_t).
-// A movable bone's tets add nothing to S on the affine maps its fit allows
-// (their rows cancel exactly), so they get a token weight that only keeps a
-// loosely attached bone's block regular. S0 is factorised once per alpha (an
+// A movable bone's tets weigh w V, the limit h -> infinity: its unknown is a
+// rotation, so every other affine motion of its fit is infinitely stiff, and
+// its turns are the bone coarse space's (bone_coarse_space.h). (In S itself
+// they add nothing on the affine maps the fit allows; a token weight instead
+// took 279 CG against 176 on arm_r5: docs/DESIGN.md.) S0 is factorised once per alpha (an
 // AcapOperator with these weights: the pattern of L, a ninth of FEM's factor
 // entries), never per Newton step; a rebuild only inverts the 9x9 blocks.
 // The preconditioned eigenvalues are 1 and those of S0^-1 S: how well one
