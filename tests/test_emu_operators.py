@@ -141,7 +141,7 @@ class Reference:
 
 def make(alpha=100.0, modes=24, r=2, **kw):
     s, m = small_scene(r, **kw)
-    solver = emu.Solver(s, "emu", alpha=alpha, modes=modes)
+    solver = emu.Solver(s, "emu", alpha=alpha, modes=modes, preconditioner="woodbury")
     return solver, Reference(solver)
 
 
@@ -324,10 +324,10 @@ def test_hessian_product_ignores_gravity_and_is_linear(ref):
 @pytest.fixture(scope="module")
 def mode_setup():
     s, _ = small_scene(2)
-    base = emu.Solver(s, "emu", alpha=100.0, modes=3)
+    base = emu.Solver(s, "emu", alpha=100.0, modes=3, preconditioner="woodbury")
     R0 = Reference(base)
     ks = choose_scalar_modes(R0.L)
-    solver = emu.Solver(s, "emu", alpha=100.0, modes=3 * ks)
+    solver = emu.Solver(s, "emu", alpha=100.0, modes=3 * ks, preconditioner="woodbury")
     return solver, Reference(solver), ks
 
 
@@ -393,7 +393,7 @@ def test_woodbury_solve_equals_dense_solve(eps, alpha):
 def test_woodbury_with_all_modes_is_exact_newton(eps):
     s, _ = small_scene(2)
     nfree = len(s.points) - len(s.model_pins()[0])
-    solver = emu.Solver(s, "emu", alpha=100.0, modes=3 * nfree)
+    solver = emu.Solver(s, "emu", alpha=100.0, modes=3 * nfree, preconditioner="woodbury")
     core = solver._core
     assert core.modes == 3 * nfree
     R = Reference(solver)
@@ -420,7 +420,7 @@ def test_modes_by_lanczos_on_a_larger_mesh():
     s, _ = small_scene(5)
     nfree = len(s.points) - len(s.model_pins()[0])
     assert nfree > 400
-    solver = emu.Solver(s, "emu", alpha=100.0, modes=3)
+    solver = emu.Solver(s, "emu", alpha=100.0, modes=3, preconditioner="woodbury")
     md = solver.model
     G, vol = gradient_operator(np.asarray(md.rest), np.asarray(md.tets).astype(np.int64))
     free = np.setdiff1d(np.arange(len(md.rest)), np.asarray(md.pinned))
@@ -429,7 +429,7 @@ def test_modes_by_lanczos_on_a_larger_mesh():
     L = (Gs.T @ sp.diags(Dd) @ Gs).toarray()
     # G's x-columns give vec(F) rows 0, 3, 6 (F[0, k]); L_ab = sum w V b_a . b_b
     ks = choose_scalar_modes(L, lo=8, hi=30)
-    solver = emu.Solver(s, "emu", alpha=100.0, modes=3 * ks)
+    solver = emu.Solver(s, "emu", alpha=100.0, modes=3 * ks, preconditioner="woodbury")
     core = solver._core
     lam = np.asarray(core.mode_values())
     w, psi = np.linalg.eigh(L)
@@ -513,4 +513,4 @@ def test_constant_schur_preconditioner_against_numpy(eps, alpha):
     ev = np.sort(np.linalg.eigvals(Minv @ H).real)
     assert ev.min() >= lo * (1 - 1e-6) and ev.max() <= hi * (1 + 1e-6), (ev.min(), ev.max(), lo, hi)
     with pytest.raises(ValueError, match="preconditioner='constant-schur'"):
-        emu.Solver(s, "emu", alpha=100.0)._core.constant_schur_solve(load, F, Rhs)
+        emu.Solver(s, "emu", alpha=100.0, preconditioner="woodbury")._core.constant_schur_solve(load, F, Rhs)

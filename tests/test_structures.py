@@ -6,11 +6,17 @@ import emu
 from emu.scenes import arm, fusiform
 
 
-def test_pinned_muscle_builds_only_the_acap_factor_modes_and_blocks():
+def test_pinned_muscle_builds_only_the_acap_factor_and_its_preconditioner():
     s = fusiform(2, warn=False)
-    solver = emu.Solver(s, "emu", error_estimate=False, alpha=100)
+    solver = emu.Solver(s, "emu", error_estimate=False, alpha=100)   # the constant-Schur default
     solver.solve({"belly": 5e4})
     built = solver.structures()
+    assert set(built) == {"ACAP factor", "constant Schur preconditioner"}, built
+    # its own factor (the ACAP matrix's pattern) and one 9x9 inverse per tet
+    assert built["constant Schur preconditioner"] >= built["ACAP factor"] + 81 * 8 * len(s.tets)
+    woodbury = emu.Solver(s, "emu", error_estimate=False, alpha=100, preconditioner="woodbury")
+    woodbury.solve({"belly": 5e4})
+    built = woodbury.structures()
     assert set(built) == {"ACAP factor", "ACAP modes", "Woodbury block inverses"}, built
     assert built["Woodbury block inverses"] >= 81 * 8 * len(s.tets)   # one 9x9 inverse per tet
     assert all(b > 0 for b in built.values())

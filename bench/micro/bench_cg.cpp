@@ -15,6 +15,7 @@
 
 #include "bar_model.h"
 #include "emu/solvers/acap.h"
+#include "emu/solvers/constant_schur.h"
 #include "emu/solvers/emu_solver.h"
 #include "emu/solvers/newton/pcg.h"
 #include "emu/solvers/woodbury.h"
@@ -26,7 +27,9 @@ struct EmuSolverProbe {
   explicit EmuSolverProbe(const Model& m) {
     EmuOptions eo;
     eo.alpha = 100.0 * m.mu(0);
+    eo.preconditioner = EmuPreconditioner::Woodbury;  // its modes; the constant Schur one is built beside it
     solver = std::make_unique<EmuSolver>(m, SolverOptions(), eo);
+    constant_schur = std::make_unique<ConstantSchur>(solver->model_, solver->layout_, *solver->acap_, eo.alpha);
     const long n = solver->layout_.num_unknowns;
     std::mt19937 rng(2);
     std::normal_distribution<double> g(0.0, 0.05);
@@ -40,6 +43,7 @@ struct EmuSolverProbe {
     for (long u = 0; u < n; ++u)
       for (int i = 0; i < 81; ++i) A[u].data()[i] = blocks(u, i);  // a row: the column-major 9x9 block
     if (!solver->woodbury_->update(A)) throw std::runtime_error("bench_cg: the Woodbury matrix X is not definite");
+    if (!constant_schur->update(A)) throw std::runtime_error("bench_cg: a block is not definite");
     v = Mat9X::Zero(9, n);
     for (long i = 0; i < v.size(); ++i) v.data()[i] = g(rng);
   }
@@ -47,13 +51,18 @@ struct EmuSolverProbe {
   void fit(const Mat9X& in) {
     solver->fit_linear_into(in, dx, Fd);
   }
-  void precondition(const Mat9X& in, Mat9X& out) const { solver->woodbury_->apply(in, out); }
+  /// which: 0 the Woodbury preconditioner, 1 the constant Schur one
+  void precondition(const Mat9X& in, Mat9X& out, int which = 0) const {
+    if (which == 1) constant_schur->apply(in, out);
+    else solver->woodbury_->apply(in, out);
+  }
   void back_substitution(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& Z) const { solver->acap_->solve(rhs, Z); }
   long position_dofs() const { return solver->acap_->dofs(); }
   long unknowns() const { return solver->layout_.num_unknowns; }
   int modes() const { return solver->woodbury_->k(); }
 
   std::unique_ptr<EmuSolver> solver;
+  std::unique_ptr<ConstantSchur> constant_schur;
   std::vector<Mat9> A;
   Mat9X v, Fd;
   Eigen::MatrixX3d dx;
@@ -81,6 +90,9 @@ constexpr double kProduct = kFit + 81 + 27;
 // Woodbury: A^-1 r (81 + 9 + 9), its corner targets (24 + 9 read), the
 // correction's per-tet values (9 written, 9 + 9 reduced), A^-1 of it added (81 + 9 + 18)
 constexpr double kWoodbury = 99 + 33 + 27 + 108;
+// constant Schur: the same per-tet passes as the Woodbury application (the S0
+// back-substitution, vertex-sized, in place of the thin mode products)
+constexpr double kConstantSchur = kWoodbury;
 // PCG's vector work: d, r updated with |r|^2 (4 read, 2 written), r.z and p (3 read, 1 written)
 constexpr double kVectors = 6 + 4;
 
@@ -135,15 +147,27 @@ void woodbury_apply(benchmark::State& state) {
   state.counters["modes"] = p.modes();
 }
 
-// Whole PCG iterations (tolerance 0: none stops early), items = iterations x tets.
+void constant_schur_apply(benchmark::State& state) {
+  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
+  Mat9X out;
+  for (auto _ : state) {
+    p.precondition(p.v, out, 1);
+    benchmark::DoNotOptimize(out.data());
+  }
+  report(state, kConstantSchur);
+}
+
+// Whole PCG iterations (tolerance 0: none stops early), items = iterations x tets;
+// state.range(1): the preconditioner (0 Woodbury, 1 constant Schur).
 void cg_iteration(benchmark::State& state) {
   EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
+  const int which = static_cast<int>(state.range(1));
   Pcg<Mat9X> pcg;
   Mat9X d;
   const int iterations = 20;
   for (auto _ : state) {
     const PcgResult r = pcg.solve([&](const Mat9X& in, Mat9X& out) { p.product(in, out); },
-                                  [&](const Mat9X& in, Mat9X& out) { p.precondition(in, out); }, p.v, 0.0,
+                                  [&](const Mat9X& in, Mat9X& out) { p.precondition(in, out, which); }, p.v, 0.0,
                                   iterations, d);
     if (r.iterations != iterations) {
       state.SkipWithError("PCG stopped early (negative curvature)");
@@ -162,5 +186,6 @@ BENCHMARK(fit)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 BENCHMARK(back_substitution)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 BENCHMARK(hessian_product)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 BENCHMARK(woodbury_apply)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
-BENCHMARK(cg_iteration)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(constant_schur_apply)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+BENCHMARK(cg_iteration)->Args({0, 0})->Args({1, 0})->Args({0, 1})->Args({1, 1})->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();

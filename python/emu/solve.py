@@ -186,8 +186,11 @@ class Solver:
     rtol_energy   ... and the last energy decrease <= rtol_energy x total decrease
     max_iterations  per solve
     preconditioner  Newton-Krylov's preconditioner: "woodbury" (the paper's approximation through
-                  k modes, no factorisation after setup) or "schur" (exact inverse of the filtered
+                  k modes, no factorisation after setup), "schur" (exact inverse of the filtered
                   Hessian through the position-space Schur complement: one factorisation per rebuild)
+                  or "constant-schur" (that inverse with the Schur complement replaced by a constant
+                  matrix of the ACAP matrix's form: one factorisation per alpha, no modes; fewer CG
+                  iterations on large meshes, measured in docs/DESIGN.md)
     preconditioner_refresh  rebuild the preconditioner every n steps (Newton-Krylov: sooner if CG
                   slows); None: 3 for Newton-Krylov, 20 for L-BFGS (measured: docs/DESIGN.md)
     exact_when_definite  use the unfiltered Hessian when it is definite (see README)
@@ -242,7 +245,7 @@ class Solver:
 
     def __init__(self, scene: Scene, method: str = "emu", *, alpha: float | None = None, modes: int = 24,
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
-                 max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "woodbury",
+                 max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "constant-schur",
                  preconditioner_refresh: int | None = None, bone_coarse_space: bool = True,
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,

@@ -71,7 +71,7 @@ struct EmuOptions {
   int cg_max_iterations = 500;   // per Newton-Krylov step
   double cg_forcing_max = 0.5;       // Eisenstat-Walker eta_k = min(max, (|g_k| / |g_0|)^exponent)
   double cg_forcing_exponent = 0.5;
-  EmuPreconditioner preconditioner = EmuPreconditioner::Woodbury;
+  EmuPreconditioner preconditioner = EmuPreconditioner::ConstantSchur;
   int preconditioner_refresh = 3;  // Newton-Krylov: rebuild the Woodbury preconditioner every n steps
   bool bone_coarse_space = true;   // movable bones: add the bone-rotation coarse correction (see emu_solver.cpp)
   // Movable bones: directions of CG solves far longer than the last one kept
