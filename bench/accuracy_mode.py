@@ -8,6 +8,10 @@ estimate (EMU) or solve (FEM), 1 thread unless --threads; errors are to FEM
 converged to |g| <= 1e-9 |g0|.
 
     python bench/accuracy_mode.py [--scenes arm_r5 fusiform_20k realistic_biceps ...] [--target 0.01]
+                                  [--emu-preconditioners constant-schur woodbury]
+
+With several --emu-preconditioners, the EMU columns repeat per preconditioner
+(same run: the comparison a default change needs).
 """
 from __future__ import annotations
 
@@ -28,11 +32,17 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--emu-step-fraction", type=float, default=None,
                     help="EMU's accuracy stopping rule: a full step under this fraction of the target (default: the Solver's)")
+    ap.add_argument("--emu-preconditioners", nargs="*", default=[None],
+                    help="Newton-Krylov preconditioners for the EMU columns (default: the Solver's)")
     a = ap.parse_args(argv)
     start_run(a.threads)
-    print("| scene | FEM s | FEM lagged s | FEM accuracy s (error) | EMU re-solving s (solves, error) | "
-          "EMU corrected s (solves, corrected, estimate, error) |")
-    print("|---|---|---|---|---|---|")
+    emu_cols = []
+    for pc in a.emu_preconditioners:
+        tag = "" if pc is None else f", {pc}"
+        emu_cols += [f"EMU re-solving{tag} s (solves, error)",
+                     f"EMU corrected{tag} s (solves, corrected, estimate, error)"]
+    print("| scene | FEM s | FEM lagged s | FEM accuracy s (error) | " + " | ".join(emu_cols) + " |")
+    print("|---|---|---|---|" + "---|" * len(emu_cols))
     for name in a.scenes:
         scene, act, normalized = SCENES[name]()
         with warnings.catch_warnings():
@@ -42,16 +52,19 @@ def main(argv=None):
             lagged = emu.Solver(scene, "fem", lagged_factor=True).solve(act, normalized=normalized)
             fem_a = emu.Solver(scene, "fem", accuracy=a.target).solve(act, normalized=normalized)
             fraction = {} if a.emu_step_fraction is None else {"step_fraction": a.emu_step_fraction}
-            runs = [emu.Solver(scene, "emu", accuracy=a.target, fem_correction=c, **fraction)
-                    .solve(act, normalized=normalized) for c in (False, True)]
+            runs = []
+            for pc in a.emu_preconditioners:
+                opts = dict(fraction, **({} if pc is None else {"preconditioner": pc}))
+                runs.append([emu.Solver(scene, "emu", accuracy=a.target, fem_correction=c, **opts)
+                             .solve(act, normalized=normalized) for c in (False, True)])
         cells = [f"{fem.time_s:.2f}", f"{lagged.time_s:.2f}",
                  f"{fem_a.time_s:.2f} ({emu.vertex_error(fem_a, ref):.1e})"]
-        resolve, corrected = runs
-        cells.append(f"{resolve.time_s + resolve.error_estimate_time_s:.2f} ({resolve.settings['alpha_attempts']}, "
-                     f"{emu.vertex_error(resolve, ref):.1e})")
-        cells.append(f"{corrected.time_s + corrected.error_estimate_time_s:.2f} "
-                     f"({corrected.settings['alpha_attempts']}, {'yes' if corrected.corrected else 'no'}, "
-                     f"{corrected.error_estimate:.1e}, {emu.vertex_error(corrected, ref):.1e})")
+        for resolve, corrected in runs:
+            cells.append(f"{resolve.time_s + resolve.error_estimate_time_s:.2f} "
+                         f"({resolve.settings['alpha_attempts']}, {emu.vertex_error(resolve, ref):.1e})")
+            cells.append(f"{corrected.time_s + corrected.error_estimate_time_s:.2f} "
+                         f"({corrected.settings['alpha_attempts']}, {'yes' if corrected.corrected else 'no'}, "
+                         f"{corrected.error_estimate:.1e}, {emu.vertex_error(corrected, ref):.1e})")
         print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
 
 
