@@ -476,9 +476,10 @@ def test_schur_preconditioner_is_the_exact_inverse_of_the_filtered_hessian(eps):
     assert sol.cg_iterations <= sol.iterations + 2
 
 
+@pytest.mark.parametrize("tendon_fraction", [0.12, 0.0])   # without tendons S0 = c K: K's own factor serves
 @pytest.mark.parametrize("alpha", [30.0, 300.0])
 @pytest.mark.parametrize("eps", [0.0, 0.2])
-def test_constant_schur_preconditioner_against_numpy(eps, alpha):
+def test_constant_schur_preconditioner_against_numpy(eps, alpha, tendon_fraction):
     """preconditioner='constant-schur' applies M^-1 = A^-1 + alpha A^-1 C^T S0^-1 C A^-1
     with the constant S0 = G_f^T diag(e) G_f, e_t = w_t V_t h_t / (h_t + alpha w_t),
     h_t = mu_t + lambda_t / 3 (built here in numpy): the same vectors; M^-1 is
@@ -486,7 +487,7 @@ def test_constant_schur_preconditioner_against_numpy(eps, alpha):
     approximate Schur complement, the eigenvalues of M^-1 H lie between
     min(1, eig(S0^-1 S)) and max(1, eig(S0^-1 S)), S = K - alpha C A^-1 C^T.
     A new alpha refactorises S0 (the weights change)."""
-    s, _ = small_scene(2)
+    s, _ = small_scene(2, tendon_fraction=tendon_fraction)
     solver = emu.Solver(s, "emu", alpha=100.0, preconditioner="constant-schur")
     core = solver._core
     core.alpha = alpha * solver.mu_ref

@@ -14,6 +14,10 @@ def test_pinned_muscle_builds_only_the_acap_factor_and_its_preconditioner():
     assert set(built) == {"ACAP factor", "constant Schur preconditioner"}, built
     # its own factor (the ACAP matrix's pattern) and one 9x9 inverse per tet
     assert built["constant Schur preconditioner"] >= built["ACAP factor"] + 81 * 8 * len(s.tets)
+    # one tissue (no tendons): S0 is a multiple of K and K's factor serves, only the blocks are its own
+    one = fusiform(2, tendon_fraction=0.0, warn=False)
+    own = emu.Solver(one, "emu", error_estimate=False, alpha=100).structures()
+    assert own["constant Schur preconditioner"] == 81 * 8 * len(one.tets), own
     woodbury = emu.Solver(s, "emu", error_estimate=False, alpha=100, preconditioner="woodbury")
     woodbury.solve({"belly": 5e4})
     built = woodbury.structures()

@@ -9,14 +9,18 @@ Eigen::VectorXd ConstantSchur::weights(const Model& model, const UnknownLayout& 
                                        double alpha) {
   const Eigen::Index m = model.tets.rows();
   Eigen::VectorXd e(m);
+  double kappa = 0;  // the largest e_t / (w_t V_t) of the soft tissue (<= 1)
   for (Eigen::Index t = 0; t < m; ++t) {
-    if (layout.is_bone_tet(t)) {  // infinitely stiff: the limit h -> infinity
-      e(t) = wv(t);
-      continue;
-    }
+    if (layout.is_bone_tet(t)) continue;
     const double h = model.mu(t) + model.lambda(t) / 3.0;
     e(t) = wv(t) * h / (h + alpha * model.acap_weight(t));
+    kappa = std::max(kappa, e(t) / wv(t));
   }
+  // A bone is rigid (the limit h -> infinity, e -> w V), scaled like the
+  // stiffest soft tissue so that S0 stays a multiple of K where the soft
+  // tissue's weights are (measured alike on arm_r5: docs/DESIGN.md).
+  for (Eigen::Index t = 0; t < m; ++t)
+    if (layout.is_bone_tet(t)) e(t) = (kappa > 0 ? kappa : 1.0) * wv(t);
   return e;
 }
 
@@ -27,9 +31,19 @@ ConstantSchur::ConstantSchur(const Model& model, const UnknownLayout& layout, co
 }
 
 void ConstantSchur::set_alpha(double alpha) {
-  if (alpha == alpha_ && s0_) return;
+  if (alpha == alpha_) return;
   alpha_ = alpha;
-  const Eigen::VectorXd e = weights(model_, layout_, acap_.weight_volume(), alpha);
+  const Eigen::VectorXd& wv = acap_.weight_volume();
+  const Eigen::VectorXd e = weights(model_, layout_, wv, alpha);
+  // S0 = c K where every tet's e_t / (w_t V_t) is the same c (one tissue, or
+  // ACAP weights proportional to the curvatures): K's own factor serves.
+  const Eigen::ArrayXd ratio = e.array() / wv.array();
+  if (ratio.maxCoeff() - ratio.minCoeff() <= 1e-12 * ratio.maxCoeff()) {
+    scale_ = ratio.maxCoeff();
+    s0_.reset();
+    return;
+  }
+  scale_ = 1.0;
   s0_ = std::make_unique<AcapOperator>(model_, layout_, &e, &acap_);  // the ACAP matrix's pattern
 }
 
@@ -64,12 +78,13 @@ void ConstantSchur::apply(const Mat9X& r, Mat9X& out) const {
   Eigen::MatrixX3d y;
   acap_.apply_C(per_tet_view(layout_, out, per_tet), y);
   Eigen::MatrixXd z;
-  s0_->solve(Eigen::MatrixXd(y), z);
+  (s0_ ? *s0_ : acap_).solve(Eigen::MatrixXd(y), z);  // S0^-1 = (scale_ K)^-1 without an own factor
   acap_.apply_CT(Eigen::MatrixX3d(z), per_tet);
   Mat9X ct;
   reduce_to_unknowns(layout_, per_tet, ct);
+  const double a = alpha_ / scale_;
 #pragma omp parallel for schedule(static)
-  for (long u = 0; u < n; ++u) out.col(u).noalias() += alpha_ * (Ainv_[u] * ct.col(u));
+  for (long u = 0; u < n; ++u) out.col(u).noalias() += a * (Ainv_[u] * ct.col(u));
 }
 
 }  // namespace emu

@@ -10,13 +10,17 @@
 // so S0 takes one scalar curvature per tet, h_t = mu_t + lambda_t / 3 (between
 // its shear and volume curvatures):
 //   S0 = L_e (x) I_3,  L_e = sum_t e_t b b^T,  e_t = w_t V_t h_t / (h_t + alpha w_t).
-// A movable bone's tets weigh w V, the limit h -> infinity: its unknown is a
-// rotation, so every other affine motion of its fit is infinitely stiff, and
-// its turns are the bone coarse space's (bone_coarse_space.h). (In S itself
-// they add nothing on the affine maps the fit allows; a token weight instead
-// took 279 CG against 176 on arm_r5: docs/DESIGN.md.) S0 is factorised once per alpha (an
-// AcapOperator with these weights: the pattern of L, a ninth of FEM's factor
-// entries), never per Newton step; a rebuild only inverts the 9x9 blocks.
+// A movable bone's tets weigh kappa w V (kappa the largest e / (w V) of the
+// soft tissue), a rigid limit: its unknown is a rotation, so every other affine
+// motion of its fit is infinitely stiff, and its turns are the bone coarse
+// space's (bone_coarse_space.h). (In S itself they add nothing on the affine
+// maps the fit allows; a token weight instead took 279 CG against 176 on
+// arm_r5: docs/DESIGN.md.) Where every e_t / (w_t V_t) is the same c (one
+// tissue, or ACAP weights proportional to the curvatures), S0 = c K and K's
+// factor serves: nothing more is factorised, ever. Otherwise S0 is factorised
+// once per alpha (an AcapOperator with these weights on the ACAP matrix's
+// symbolic analysis: a ninth of FEM's factor entries), never per Newton step;
+// a rebuild only inverts the 9x9 blocks.
 // The preconditioned eigenvalues are 1 and those of S0^-1 S: how well one
 // scalar per tet stands for the material's curvatures (nearly incompressible
 // tissue: lambda ~ 25 mu), independent of the mesh size, where the Woodbury
@@ -48,8 +52,9 @@ class ConstantSchur {
   static Eigen::VectorXd weights(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd& wv,
                                  double alpha);
 
-  double factor_nnz() const { return s0_->factor().factor_nnz(); }
-  /// Bytes held: S0's factor and the block inverses.
+  /// Entries of S0's own factor (0 where S0 is a multiple of K and K's factor serves).
+  double factor_nnz() const { return s0_ ? s0_->factor().factor_nnz() : 0.0; }
+  /// Bytes held: S0's own factor (if any) and the block inverses.
   double bytes() const { return 8.0 * factor_nnz() + sizeof(Mat9) * double(Ainv_.size()); }
 
  private:
@@ -57,7 +62,8 @@ class ConstantSchur {
   const UnknownLayout& layout_;
   const AcapOperator& acap_;
   double alpha_;
-  std::unique_ptr<AcapOperator> s0_;
+  std::unique_ptr<AcapOperator> s0_;  // empty where S0 = scale_ K (K's factor serves)
+  double scale_ = 1.0;
   std::vector<Mat9> Ainv_;
   bool ok_ = false;
 };
