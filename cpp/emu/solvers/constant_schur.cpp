@@ -9,18 +9,15 @@ Eigen::VectorXd ConstantSchur::weights(const Model& model, const UnknownLayout& 
                                        double alpha) {
   const Eigen::Index m = model.tets.rows();
   Eigen::VectorXd e(m);
-  double kappa = 0;  // the largest e_t / (w_t V_t) of the soft tissue (<= 1)
   for (Eigen::Index t = 0; t < m; ++t) {
-    if (layout.is_bone_tet(t)) continue;
+    // a bone is rigid: the limit h -> infinity, e -> w V
+    if (layout.is_bone_tet(t)) {
+      e(t) = wv(t);
+      continue;
+    }
     const double h = model.mu(t) + model.lambda(t) / 3.0;
     e(t) = wv(t) * h / (h + alpha * model.acap_weight(t));
-    kappa = std::max(kappa, e(t) / wv(t));
   }
-  // A bone is rigid (the limit h -> infinity, e -> w V), scaled like the
-  // stiffest soft tissue so that S0 stays a multiple of K where the soft
-  // tissue's weights are (measured alike on arm_r5: docs/DESIGN.md).
-  for (Eigen::Index t = 0; t < m; ++t)
-    if (layout.is_bone_tet(t)) e(t) = (kappa > 0 ? kappa : 1.0) * wv(t);
   return e;
 }
 

@@ -10,17 +10,18 @@
 // so S0 takes one scalar curvature per tet, h_t = mu_t + lambda_t / 3 (between
 // its shear and volume curvatures):
 //   S0 = L_e (x) I_3,  L_e = sum_t e_t b b^T,  e_t = w_t V_t h_t / (h_t + alpha w_t).
-// A movable bone's tets weigh kappa w V (kappa the largest e / (w V) of the
-// soft tissue), a rigid limit: its unknown is a rotation, so every other affine
-// motion of its fit is infinitely stiff, and its turns are the bone coarse
-// space's (bone_coarse_space.h). (In S itself they add nothing on the affine
-// maps the fit allows; a token weight instead took 279 CG against 176 on
-// arm_r5: docs/DESIGN.md.) Where every e_t / (w_t V_t) is the same c (one
-// tissue, or ACAP weights proportional to the curvatures), S0 = c K and K's
-// factor serves: nothing more is factorised, ever. Otherwise S0 is factorised
-// once per alpha (an AcapOperator with these weights on the ACAP matrix's
-// symbolic analysis: a ninth of FEM's factor entries), never per Newton step;
-// a rebuild only inverts the 9x9 blocks.
+// A movable bone's tets weigh w V, the limit h -> infinity: its unknown is a
+// rotation, so every other affine motion of its fit is infinitely stiff, and
+// its turns are the bone coarse space's (bone_coarse_space.h). (In S itself
+// they add nothing on the affine maps the fit allows; a token weight instead
+// took 279 CG against 176 on arm_r5; scaled like the soft tissue, c w V, so
+// that S0 = c K, the strict solve of realistic_biceps at 300 mu did not
+// converge: docs/DESIGN.md.) Where every e_t / (w_t V_t) is the same c (one
+// tissue without movable bones), S0 = c K and K's factor serves: nothing more
+// is factorised, for any alpha. Otherwise S0 is factorised once per alpha (an
+// AcapOperator with these weights on the ACAP matrix's symbolic analysis: a
+// ninth of FEM's factor entries), never per Newton step; a rebuild only
+// inverts the 9x9 blocks.
 // The preconditioned eigenvalues are 1 and those of S0^-1 S: how well one
 // scalar per tet stands for the material's curvatures (nearly incompressible
 // tissue: lambda ~ 25 mu), independent of the mesh size, where the Woodbury
