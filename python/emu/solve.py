@@ -537,17 +537,20 @@ class Solver:
         Newton correction x2 of the estimate's x1; if the corrections contract
         (|x2 - x1| <= CORRECTION_CONTRACTION |x1 - x|) to within ACCEPT x target
         and a third correction contracts again (|x3 - x2| <= CORRECTION_CONTRACTION
-        |x2 - x1|: FEM's Newton is in its fast regime), make x2 the solution's positions with |x2 - x1| as its estimate (x2 is
-        closer than that where they contract) and return True; else leave the
-        solution as it was (the caller re-solves at a larger alpha)."""
+        |x2 - x1|: FEM's Newton is in its fast regime), make x2 the solution's
+        positions with |x2 - x1| as its estimate (x2 is closer than that where
+        they contract) and return True; else leave the solution as it was (the
+        caller re-solves at a larger alpha)."""
+        def corrected(x):
+            """One FEM Newton correction of x on the estimator's factor, None if it fails."""
+            try:
+                y = self._estimator.newton_correction(load, x, max_steps=1)
+            except (RuntimeError, ValueError):   # ValueError: with contact, x has surfaces through each other
+                return None
+            return y if np.all(np.isfinite(y)) else None
+
         x1, own = sol.fem_correction, sol.error_estimate   # own = vertex_error(emu_positions, x1)
-        if x1 is None:
-            return False
-        try:
-            x2 = self._estimator.newton_correction(load, x1, max_steps=1)
-        except (RuntimeError, ValueError):   # ValueError: with contact, x1 has surfaces through each other
-            return False
-        if not np.all(np.isfinite(x2)):
+        if x1 is None or (x2 := corrected(x1)) is None:
             return False
         step = vertex_error(x1, x2)
         if not (step <= CORRECTION_CONTRACTION * own and step <= ACCEPT * target):
@@ -556,11 +559,8 @@ class Solver:
         # Newton converges only linearly (a soft valley), every step is short.
         # The next step must contract again (fusiform_20k: steps of 2.6e-4 and
         # 2.6e-4 while 2.3e-3 remained; docs/DESIGN.md).
-        try:
-            x3 = self._estimator.newton_correction(load, x2, max_steps=1)
-        except (RuntimeError, ValueError):
-            return False
-        if not (np.all(np.isfinite(x3)) and vertex_error(x2, x3) <= CORRECTION_CONTRACTION * step):
+        x3 = corrected(x2)
+        if x3 is None or vertex_error(x2, x3) > CORRECTION_CONTRACTION * step:
             return False
         sol.positions, sol.corrected, sol.error_estimate = x2, True, step
         sol.error_estimate_note = (f"EMU's answer (estimated {own:.2g} from FEM's) corrected by two FEM Newton "
