@@ -133,7 +133,9 @@ def test_accuracy_mode_table_small():
     resolve, corrected = cells[4], cells[5]
     assert resolve.split("(")[1].startswith("2,")          # alpha = 100 mu misses: a re-solve ...
     solves, was_corrected, _, error = corrected.split("(")[1].rstrip(")").split(", ")
-    assert solves == "1" and was_corrected == "yes" and float(error) <= 0.01   # ... or one solve, corrected
+    # ... or one solve, corrected; where FEM's corrections do not contract from
+    # EMU's answer (the third-correction check) the row re-solves instead
+    assert (solves, was_corrected) in {("1", "yes"), ("2", "no")} and float(error) <= 0.01
 
 
 def test_contact_small(tmp_path):

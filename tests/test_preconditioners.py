@@ -44,3 +44,26 @@ def test_constant_schur_builds_no_modes_and_survives_a_new_alpha():
 def test_unknown_preconditioner_is_refused_with_the_choices():
     with pytest.raises(ValueError, match="constant-schur"):
         emu.Solver(emu.scenes.fusiform(2, warn=False), "emu", preconditioner="jacobi")
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_cg_truncation_test_changes_the_path_not_the_answer(kind):
+    """CG's Nash-Sofer truncation test (cg_model_decrease, on by default) and
+    the residual test alone reach the same strict answer."""
+    make, act, normalized = KINDS[kind]
+    scene = make()
+    diag = emu.bbox_diagonal(scene.points)
+    sols = {}
+    for c in (0.0, 0.5):
+        solver = emu.Solver(scene, "emu", alpha=100, error_estimate=False, rtol_grad=1e-9, cg_model_decrease=c)
+        assert solver.settings["cg_model_decrease"] == c
+        sols[c] = solver.solve(act, normalized=normalized)
+        assert sols[c].converged, (c, sols[c].status)
+    apart = np.abs(sols[0.0].positions - sols[0.5].positions).max() / diag
+    assert apart < 1e-6, apart
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan")])
+def test_cg_model_decrease_outside_zero_one_is_refused(bad):
+    with pytest.raises(ValueError, match="cg_model_decrease must lie in"):
+        emu.Solver(emu.scenes.fusiform(2, warn=False), "emu", alpha=100, cg_model_decrease=bad)

@@ -180,6 +180,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("cg_max_iterations", &EmuOptions::cg_max_iterations)
       .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max)
       .def_readwrite("cg_forcing_exponent", &EmuOptions::cg_forcing_exponent)
+      .def_readwrite("cg_model_decrease", &EmuOptions::cg_model_decrease)
       .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh)
       .def_readwrite("preconditioner", &EmuOptions::preconditioner)
       .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space)

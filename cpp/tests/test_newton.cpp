@@ -250,4 +250,47 @@ TEST(pcg_solves_spd_systems_and_stops_at_negative_curvature) {
   CHECK((d - b.cwiseQuotient(diag)).norm() == 0.0);
 }
 
+TEST(pcg_model_decrease_is_the_quadratic_model_and_its_truncation_test_holds_where_cg_stops) {
+  // A stiff block that carries most of |b| (Jacobi resolves it at once) and
+  // a soft 1D Laplacian that carries most of the energy: a loose residual
+  // test stops while the model still falls fast, the Nash-Sofer test goes on.
+  std::mt19937 rng(3);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  std::uniform_real_distribution<double> ud(0.0, 1.0);
+  const int m = 30, n = 2 * m;
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n, n);
+  Eigen::VectorXd b(n);
+  for (int i = 0; i < m; ++i) {
+    H(i, i) = 1e3 * (1.0 + 0.1 * ud(rng));
+    b(i) = nd(rng);
+    H(m + i, m + i) = 2.0 + 1e-3;
+    if (i + 1 < m) H(m + i, m + i + 1) = H(m + i + 1, m + i) = -1.0;
+    b(m + i) = 0.05;
+  }
+  const Eigen::VectorXd diag = H.diagonal();
+  auto product = [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) { out = H * v; };
+  auto jacobi = [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) { z = r.cwiseQuotient(diag); };
+  auto q = [&](const Eigen::VectorXd& d) { return 0.5 * d.dot(H * d) - b.dot(d); };
+  Pcg<Eigen::VectorXd> pcg;
+  Eigen::VectorXd d;
+  const double tol = 0.5 * b.norm();
+  const PcgResult loose = pcg.solve(product, jacobi, b, tol, 500, d);
+  CHECK(loose.converged);
+  CHECK(std::abs(loose.model - q(d)) <= 1e-10 * std::abs(q(d)));  // the model CG tracks is q at its iterate
+  const double c = 0.5;
+  const PcgResult truncated = pcg.solve(product, jacobi, b, tol, 500, d, c);
+  CHECK(truncated.converged);
+  CHECK(truncated.iterations > loose.iterations + 2);
+  CHECK(std::abs(truncated.model - q(d)) <= 1e-10 * std::abs(q(d)));
+  CHECK(truncated.model < loose.model);  // the longer solve lowered the model further
+  // where it stopped the test holds; one iteration before, the residual test
+  // held too (it held from loose.iterations on) but the truncation test did not
+  const int k = truncated.iterations;
+  Eigen::VectorXd d1, d2;  // k - 1 and k - 2 iterations
+  pcg.solve(product, jacobi, b, 0.0, k - 1, d1);
+  pcg.solve(product, jacobi, b, 0.0, k - 2, d2);
+  CHECK(k * (q(d1) - q(d)) <= c * std::abs(q(d)) * (1 + 1e-12));
+  CHECK((k - 1) * (q(d2) - q(d1)) > c * std::abs(q(d1)));
+}
+
 TEST_MAIN()

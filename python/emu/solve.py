@@ -193,6 +193,11 @@ class Solver:
                   or "constant-schur" (that inverse with the Schur complement replaced by a constant
                   matrix of the ACAP matrix's form: one factorisation per alpha, no modes; fewer CG
                   iterations on large meshes, measured in docs/DESIGN.md)
+    cg_model_decrease  Newton-Krylov: CG stops when its residual meets the forcing
+                  tolerance and the last iteration lowered the quadratic model by
+                  at most this fraction of its decrease so far, divided by the
+                  iteration count (Nash-Sofer's truncation test; 0.5 by default,
+                  0: the residual test alone; measured in docs/DESIGN.md)
     preconditioner_refresh  rebuild the preconditioner every n steps (Newton-Krylov: sooner if CG
                   slows); None: 3 for Newton-Krylov, 20 for L-BFGS (measured: docs/DESIGN.md)
     exact_when_definite  use the unfiltered Hessian when it is definite (see README)
@@ -247,7 +252,8 @@ class Solver:
 
     def __init__(self, scene: Scene, method: str = "emu", *, alpha: float | None = None, modes: int = 24,
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
-                 max_iterations: int | None = None, cg_max_iterations: int = 500, preconditioner: str = "constant-schur",
+                 max_iterations: int | None = None, cg_max_iterations: int = 500, cg_model_decrease: float = 0.5,
+                 preconditioner: str = "constant-schur",
                  preconditioner_refresh: int | None = None, bone_coarse_space: bool = True,
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
@@ -321,6 +327,10 @@ class Solver:
             eo.modes = int(modes)
             eo.step = getattr(_core.EmuStep, step.replace("-", "_"))
             eo.cg_max_iterations = int(cg_max_iterations)
+            if not 0 <= cg_model_decrease <= 1:
+                raise ValueError(f"cg_model_decrease must lie in [0, 1] (0: the residual test alone), "
+                                 f"got {cg_model_decrease!r}")
+            eo.cg_model_decrease = float(cg_model_decrease)
             if preconditioner_refresh is None:
                 preconditioner_refresh = LBFGS_REFRESH if step == "lbfgs" else 3
             if int(preconditioner_refresh) < 1:
@@ -338,7 +348,8 @@ class Solver:
             eo.lbfgs_memory = int(lbfgs_memory)
             self._core = _core.EmuSolver(self.model, opts, eo)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
-                                 preconditioner=preconditioner if step == "newton-krylov" else None)
+                                 preconditioner=preconditioner if step == "newton-krylov" else None,
+                                 cg_model_decrease=eo.cg_model_decrease if step == "newton-krylov" else None)
         self.setup_time_s = self._core.setup_seconds
         self.error_estimate = (bool(error_estimate) or self.accuracy is not None) and method == "emu"
         if int(error_estimate_steps) < 1:

@@ -71,6 +71,9 @@ struct EmuOptions {
   int cg_max_iterations = 500;   // per Newton-Krylov step
   double cg_forcing_max = 0.5;       // Eisenstat-Walker eta_k = min(max, (|g_k| / |g_0|)^exponent)
   double cg_forcing_exponent = 0.5;
+  // CG also needs the quadratic model to have stopped falling fast:
+  // k (q_{k-1} - q_k) <= c |q_k| (Nash-Sofer; newton/pcg.h). 0: residual test alone
+  double cg_model_decrease = 0.5;
   EmuPreconditioner preconditioner = EmuPreconditioner::ConstantSchur;
   int preconditioner_refresh = 3;  // Newton-Krylov: rebuild the Woodbury preconditioner every n steps
   bool bone_coarse_space = true;   // movable bones: add the bone-rotation coarse correction (see emu_solver.cpp)

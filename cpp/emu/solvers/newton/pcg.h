@@ -1,11 +1,21 @@
 #pragma once
 // Preconditioned conjugate gradients for a Newton step H d = b, truncated the
-// Newton-Krylov way: it stops when |r| <= tol, after max_iterations, or at
-// the first direction of non-positive curvature (p^T H p <= 0: H is
-// indefinite there), keeping the iterate so far (the preconditioned right-hand
-// side M^-1 b if that happens at once, which is a descent direction for an SPD
-// M). Works on any Eigen dense type (vectors, or 9 x #unknowns blocks);
-// inner products are sums over all entries.
+// Newton-Krylov way: it stops when |r| <= tol and, if model_decrease c > 0,
+// the quadratic model has stopped falling fast (Nash and Sofer's truncation
+// test, below), after max_iterations, or at the first direction of
+// non-positive curvature (p^T H p <= 0: H is indefinite there), keeping the
+// iterate so far (the preconditioned right-hand side M^-1 b if that happens
+// at once, which is a descent direction for an SPD M). Works on any Eigen
+// dense type (vectors, or 9 x #unknowns blocks); inner products are sums over
+// all entries.
+//
+// The model q(d) = 1/2 d^T H d - b^T d falls by 1/2 a_k r_k^T z_k in
+// iteration k (p_k^T r_k = z_k^T r_k), so q_k = -1/2 sum_{j<=k} a_j r_j^T z_j
+// costs nothing. The truncation test k (q_{k-1} - q_k) <= c |q_k| asks that
+// the last iteration add less than c/k of the decrease so far. A residual
+// test alone stops after one or two iterations while |g| is large, though
+// the model still falls fast along the smooth modes that carry the vertex
+// error (docs/DESIGN.md, "Newton-Krylov details").
 //
 // The vector work of an iteration runs in two parallel passes (the update of
 // d and r with |r|^2; r.z and the update of p after the preconditioner), the
@@ -21,17 +31,19 @@ namespace emu {
 struct PcgResult {
   int iterations = 0;              // products with H that moved the iterate
   bool negative_curvature = false;
-  bool converged = false;          // |r| <= tol reached
+  bool converged = false;          // |r| <= tol reached (and the truncation test, if asked)
+  double model = 0.0;              // q(d) = 1/2 d^T H d - b^T d at CG's last iterate (0 after negative curvature at once)
 };
 
 template <class Vec>
 class Pcg {
  public:
   /// d  the solution (resized, started at zero); product(v, out): out = H v;
-  /// precondition(r, out): out = M^-1 r.
+  /// precondition(r, out): out = M^-1 r; model_decrease c: 0 for the residual
+  /// test alone, else also k (q_{k-1} - q_k) <= c |q_k| (Nash-Sofer: 0.5).
   template <class Product, class Precondition>
   PcgResult solve(Product&& product, Precondition&& precondition, const Vec& b, double tol, int max_iterations,
-                  Vec& d) {
+                  Vec& d, double model_decrease = 0.0) {
     PcgResult res;
     d.setZero(b.rows(), b.cols());
     r_ = b;
@@ -59,7 +71,9 @@ class Pcg {
         return rr[k] * rr[k];
       });
       ++res.iterations;
-      if (std::sqrt(rr2) <= tol) {
+      const double fall = 0.5 * a * rz;  // q_{k-1} - q_k
+      res.model -= fall;
+      if (std::sqrt(rr2) <= tol && (model_decrease <= 0 || res.iterations * fall <= -model_decrease * res.model)) {
         res.converged = true;
         break;
       }
