@@ -255,10 +255,12 @@ void AcapOperator::expand(const Eigen::MatrixX3d& Z, Eigen::MatrixX3d& x) const 
 void AcapOperator::apply_CT(const Eigen::MatrixX3d& u, Mat9X& out) const {
   Eigen::MatrixX3d x = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
   expand(u, x);
-  deformation_gradients(layout_, model_.tets, x, out);
   const Eigen::Index m = model_.tets.rows();
+  out.resize(9, m);
+  // F_t(x) scaled in the same pass (a CG iteration calls this once or twice)
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t) out.col(t) *= wv_(t);
+  for (Eigen::Index t = 0; t < m; ++t)
+    out.col(t) = flatten(deformation_gradient(layout_.geometry.grad[t], x, model_.tets, t)) * wv_(t);
 }
 
 void AcapOperator::reduce_vertex(const Eigen::MatrixX3d& f, Eigen::MatrixX3d& R) const {

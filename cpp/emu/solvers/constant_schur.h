@@ -67,6 +67,10 @@ class ConstantSchur {
   double scale_ = 1.0;
   std::vector<Mat9> Ainv_;
   bool ok_ = false;
+  // apply()'s work arrays: per tet (9 x #T), per unknown, position unknowns
+  mutable Mat9X per_tet_, ct_;
+  mutable Eigen::MatrixX3d y_;
+  mutable Eigen::MatrixXd rhs_, z_;
 };
 
 }  // namespace emu
