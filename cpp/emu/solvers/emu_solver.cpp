@@ -399,13 +399,7 @@ Eigen::MatrixXd EmuSolver::woodbury_solve(const LoadCase& load, const Eigen::Mat
 Eigen::MatrixXd EmuSolver::schur_solve(const LoadCase& load, const Eigen::MatrixXd& Frows,
                                        const Eigen::MatrixXd& Rrows) {
   if (!schur_) throw std::invalid_argument("this solver has no Schur-complement preconditioner (preconditioner='schur')");
-  const Context c = make_context(load);
-  std::vector<Mat9> A;
-  blocks_into(c, to_cols(Frows), &A, nullptr);
-  if (!schur_->update(A)) throw std::runtime_error("the Schur complement S is not positive definite");
-  Mat9X out;
-  schur_->apply(to_cols(Rrows), out);
-  return out.transpose();
+  return preconditioner_solve(*schur_, load, Frows, Rrows, "the Schur complement S is not positive definite");
 }
 
 Eigen::MatrixXd EmuSolver::constant_schur_solve(const LoadCase& load, const Eigen::MatrixXd& Frows,
@@ -413,12 +407,18 @@ Eigen::MatrixXd EmuSolver::constant_schur_solve(const LoadCase& load, const Eige
   if (!constant_schur_)
     throw std::invalid_argument(
         "this solver has no constant Schur preconditioner (preconditioner='constant-schur')");
+  return preconditioner_solve(*constant_schur_, load, Frows, Rrows, "a filtered Hessian block is not positive definite");
+}
+
+template <class Preconditioner>
+Eigen::MatrixXd EmuSolver::preconditioner_solve(Preconditioner& pc, const LoadCase& load, const Eigen::MatrixXd& Frows,
+                                                const Eigen::MatrixXd& Rrows, const char* not_spd) {
   const Context c = make_context(load);
   std::vector<Mat9> A;
   blocks_into(c, to_cols(Frows), &A, nullptr);
-  if (!constant_schur_->update(A)) throw std::runtime_error("a filtered Hessian block is not positive definite");
+  if (!pc.update(A)) throw std::runtime_error(not_spd);
   Mat9X out;
-  constant_schur_->apply(to_cols(Rrows), out);
+  pc.apply(to_cols(Rrows), out);
   return out.transpose();
 }
 

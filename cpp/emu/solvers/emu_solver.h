@@ -97,6 +97,10 @@ class EmuSolver {
   const Eigen::VectorXi& tet_unknown() const { return layout_.tet_unknown; }
 
  private:
+  /// The diagnostics above: preconditioner pc rebuilt from the filtered blocks at F, applied to R.
+  template <class Preconditioner>
+  Eigen::MatrixXd preconditioner_solve(Preconditioner& pc, const LoadCase& load, const Eigen::MatrixXd& F,
+                                       const Eigen::MatrixXd& R, const char* not_spd);
   struct Context;  // per-load data: activations, pinned share of F, joint targets, gravity terms
   class Newton;    // one solve's state, as the Newton driver sees it (emu_solver.cpp)
   friend struct EmuSolverProbe;  // bench/micro/bench_cg.cpp: times the kernels of a CG iteration
