@@ -1,5 +1,7 @@
 #include "emu/solvers/constant_schur.h"
 
+#include "emu/solvers/schur_form.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -66,25 +68,14 @@ void ConstantSchur::apply(const Mat9X& r, Mat9X& out) const {
     out = r;
     return;
   }
-  const long n = r.cols();
-  out.resize(9, n);
-#pragma omp parallel for schedule(static)
-  for (long u = 0; u < n; ++u) out.col(u).noalias() = Ainv_[u] * r.col(u);
-  // + alpha A^-1 C^T S0^-1 C (A^-1 r): C with the ACAP weights, S0 with its
-  // own. The work arrays are kept between calls (a CG iteration makes one).
-  acap_.apply_C(per_tet_view(layout_, out, per_tet_), y_);
-  rhs_ = y_;
-  (s0_ ? *s0_ : acap_).solve(rhs_, z_);  // S0^-1 = (scale_ K)^-1 without an own factor
-  y_ = z_;
-  acap_.apply_CT(y_, per_tet_);
-  const Mat9X* ct = &per_tet_;
-  if (layout_.num_bones) {
-    reduce_to_unknowns(layout_, per_tet_, ct_);
-    ct = &ct_;
-  }
-  const double a = alpha_ / scale_;
-#pragma omp parallel for schedule(static)
-  for (long u = 0; u < n; ++u) out.col(u).noalias() += a * (Ainv_[u] * ct->col(u));
+  // A^-1 r + alpha A^-1 C^T S0^-1 C (A^-1 r): C with the ACAP weights, S0 with
+  // its own (S0^-1 = (scale_ K)^-1 without an own factor)
+  apply_schur_form(layout_, acap_, Ainv_, alpha_ / scale_, r, out, work_,
+                   [&](const Eigen::MatrixX3d& y, Eigen::MatrixX3d& u) {
+                     rhs_ = y;
+                     (s0_ ? *s0_ : acap_).solve(rhs_, z_);
+                     u = z_;
+                   });
 }
 
 }  // namespace emu

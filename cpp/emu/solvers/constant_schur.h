@@ -32,6 +32,7 @@
 
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
+#include "emu/solvers/schur_form.h"
 
 namespace emu {
 
@@ -67,9 +68,8 @@ class ConstantSchur {
   double scale_ = 1.0;
   std::vector<Mat9> Ainv_;
   bool ok_ = false;
-  // apply()'s work arrays: per tet (9 x #T), per unknown, position unknowns
-  mutable Mat9X per_tet_, ct_;
-  mutable Eigen::MatrixX3d y_;
+  // apply()'s work arrays, kept between calls
+  mutable SchurFormWork work_;
   mutable Eigen::MatrixXd rhs_, z_;
 };
 

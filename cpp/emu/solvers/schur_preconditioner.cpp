@@ -33,20 +33,14 @@ bool SchurPreconditioner::update(const std::vector<Mat9>& A) {
 }
 
 void SchurPreconditioner::apply(const Mat9X& r, Mat9X& out) const {
-  const long m = r.cols();
-  out.resize(9, m);
-#pragma omp parallel for schedule(static)
-  for (long t = 0; t < m; ++t) out.col(t).noalias() = Ainv_[t] * r.col(t);
-  if (!ok_) return;
-  Eigen::MatrixX3d y;
-  acap_.apply_C(out, y);
-  // the position unknowns are interleaved (3 v + c), as in the assembled S
-  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> b = y, u(y.rows(), 3);
-  factor_.solve(b.data(), u.data(), 1);
-  Mat9X ct;
-  acap_.apply_CT(Eigen::MatrixX3d(u), ct);
-#pragma omp parallel for schedule(static)
-  for (long t = 0; t < m; ++t) out.col(t).noalias() += alpha_ * (Ainv_[t] * ct.col(t));
+  apply_schur_form(layout_, acap_, Ainv_, alpha_, r, out, work_,
+                   [&](const Eigen::MatrixX3d& y, Eigen::MatrixX3d& u) {
+                     // the position unknowns are interleaved (3 v + c), as in the assembled S
+                     Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> b = y, ui(y.rows(), 3);
+                     factor_.solve(b.data(), ui.data(), 1);
+                     u = ui;
+                   },
+                   !ok_);
 }
 
 }  // namespace emu

@@ -14,6 +14,7 @@
 #include "emu/mesh/block_pattern.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
+#include "emu/solvers/schur_form.h"
 
 namespace emu {
 
@@ -43,6 +44,7 @@ class SchurPreconditioner {
   BlockPattern pattern_;
   CholmodFactor factor_;
   std::vector<Mat9> Ainv_;
+  mutable SchurFormWork work_;  // apply()'s work arrays, kept between calls
   std::vector<double> element_, values_;
   bool ok_ = false;
 };

@@ -83,30 +83,21 @@ bool Woodbury::update(const std::vector<Mat9>& A) {
 }
 
 void Woodbury::apply(const Mat9X& r, Mat9X& out) const {
-  const long m = r.cols();
-  out.resize(9, m);
-#pragma omp parallel for schedule(static)
-  for (long t = 0; t < m; ++t) out.col(t).noalias() = Ainv_[t] * r.col(t);
-  if (!x_ok_ || ks_ == 0) return;
-  // s = X^-1 B z with B z = Psi^T (C z): entry c + 3 l is (Psi^T y)(l, c).
-  Mat9X per_tet;
-  Eigen::MatrixX3d y;
-  acap_.apply_C(per_tet_view(layout_, out, per_tet), y);
-  const Eigen::MatrixXd Bz = psi_.transpose() * y;  // ks x 3
-  Eigen::VectorXd t(3 * ks_);
-  for (int l = 0; l < ks_; ++l)
-    for (int c = 0; c < 3; ++c) t(c + 3 * l) = Bz(l, c);
-  const Eigen::VectorXd s = X_llt_.solve(t);
-  Eigen::MatrixXd S(ks_, 3);
-  for (int l = 0; l < ks_; ++l)
-    for (int c = 0; c < 3; ++c) S(l, c) = s(c + 3 * l);
-  // B^T s = C^T (Psi S), then A^-1 of it.
-  const Eigen::MatrixX3d u = psi_ * S;
-  Mat9X bts;
-  acap_.apply_CT(u, per_tet);
-  reduce_to_unknowns(layout_, per_tet, bts);
-#pragma omp parallel for schedule(static)
-  for (long t = 0; t < m; ++t) out.col(t).noalias() += Ainv_[t] * bts.col(t);
+  // A^-1 r + A^-1 B^T X^-1 B (A^-1 r) with B z = Psi^T (C z): the middle is
+  // s = X^-1 (Psi^T y), entry c + 3 l of s standing for (l, c), and Psi S.
+  apply_schur_form(layout_, acap_, Ainv_, 1.0, r, out, work_,
+                   [&](const Eigen::MatrixX3d& y, Eigen::MatrixX3d& u) {
+                     const Eigen::MatrixXd Bz = psi_.transpose() * y;  // ks x 3
+                     Eigen::VectorXd t(3 * ks_);
+                     for (int l = 0; l < ks_; ++l)
+                       for (int c = 0; c < 3; ++c) t(c + 3 * l) = Bz(l, c);
+                     const Eigen::VectorXd s = X_llt_.solve(t);
+                     Eigen::MatrixXd S(ks_, 3);
+                     for (int l = 0; l < ks_; ++l)
+                       for (int c = 0; c < 3; ++c) S(l, c) = s(c + 3 * l);
+                     u = psi_ * S;
+                   },
+                   !x_ok_ || ks_ == 0);
 }
 
 Eigen::MatrixXd Woodbury::dense_B() const {

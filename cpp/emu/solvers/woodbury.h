@@ -25,6 +25,7 @@
 #include "emu/linalg/modes.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
+#include "emu/solvers/schur_form.h"
 
 namespace emu {
 
@@ -65,6 +66,7 @@ class Woodbury {
   Eigen::MatrixXd psi_;     // dofs x ks scalar modes
   Eigen::MatrixXd psi_vertex_;  // #V x ks: the modes at the vertices (zero at pinned ones)
   std::vector<Mat9> Ainv_;  // A_u^-1 (explicit: one 9x9 product per application)
+  mutable SchurFormWork work_;  // apply()'s work arrays, kept between calls
   Eigen::LLT<Eigen::MatrixXd> X_llt_;
   bool x_ok_ = false;
 };
