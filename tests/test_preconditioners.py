@@ -61,6 +61,8 @@ def test_cg_truncation_test_changes_the_path_not_the_answer(kind):
         assert sols[c].converged, (c, sols[c].status)
     apart = np.abs(sols[0.0].positions - sols[0.5].positions).max() / diag
     assert apart < 1e-6, apart
+    # ... and the option reaches CG: its path differs
+    assert list(sols[0.0].history["cg_iterations"]) != list(sols[0.5].history["cg_iterations"])
 
 
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan")])

@@ -291,6 +291,7 @@ TEST(pcg_model_decrease_is_the_quadratic_model_and_its_truncation_test_holds_whe
   pcg.solve(product, jacobi, b, 0.0, k - 2, d2);
   CHECK(k * (q(d1) - q(d)) <= c * std::abs(q(d)) * (1 + 1e-12));
   CHECK((k - 1) * (q(d2) - q(d1)) > c * std::abs(q(d1)));
+  CHECK((b - H * d1).norm() <= tol);
 }
 
 TEST_MAIN()

@@ -18,6 +18,8 @@ namespace emu {
 
 /// Work arrays of apply_schur_form, kept by the caller between calls (a CG
 /// iteration makes one call; per-tet arrays are megabytes on large meshes).
+/// A preconditioner holding one is not reentrant: its apply() runs serially
+/// (from PCG, L-BFGS and the bone coarse space, never inside a parallel region).
 struct SchurFormWork {
   Mat9X per_tet, per_unknown;  // 9 x #T, 9 x #unknowns (bones only)
   Eigen::MatrixX3d y, u;       // C A^-1 r and P of it: #dofs by 3

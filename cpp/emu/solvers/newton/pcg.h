@@ -51,12 +51,16 @@ class Pcg {
     p_ = z_;
     const Eigen::Index n = b.size();
     double rz = inner(r_, z_);
+    bool residual_met = false;  // |r| <= tol held at an earlier iterate
     for (int i = 0; i < max_iterations; ++i) {
       product(p_, Hp_);
       const double pHp = inner(p_, Hp_);
       if (!(pHp > 0)) {
         if (i == 0) d = z_;
-        res.negative_curvature = true;
+        // past the residual test (r at round-off, or an indefinite H met while
+        // the model test asked for more) the iterate is a converged one
+        if (residual_met) res.converged = true;
+        else res.negative_curvature = true;
         break;
       }
       const double a = rz / pHp;
@@ -73,7 +77,8 @@ class Pcg {
       ++res.iterations;
       const double fall = 0.5 * a * rz;  // q_{k-1} - q_k
       res.model -= fall;
-      if (std::sqrt(rr2) <= tol && (model_decrease <= 0 || res.iterations * fall <= -model_decrease * res.model)) {
+      residual_met = std::sqrt(rr2) <= tol;
+      if (residual_met && (!(model_decrease > 0) || res.iterations * fall <= -model_decrease * res.model)) {
         res.converged = true;
         break;
       }
