@@ -152,3 +152,16 @@ def test_sweep_small(tmp_path):
     pytest.importorskip("dask.distributed")
     out = run(BENCH / "sweep.py", "--cases", "2", "--resolution", "1", "--frames", "2", "--out", tmp_path)
     assert "| Dask local cluster, 2 workers" in out and "same answers (last-frame elbow angle) both ways: True" in out
+
+
+def test_demo_phases_small():
+    out = run(BENCH / "demo_phases.py", "--resolution", "2", "--frames", "4")   # 3 frames: all at zero activation
+    rows = {line.split("|")[1].strip(): line.split("|") for line in out.splitlines() if line.startswith("| f")
+            or line.startswith("| e")}
+    assert set(rows) == {"fem", "emu"}
+    emu_newton, emu_cg = map(int, rows["emu"][2].split("/"))
+    assert emu_newton > 0 and emu_cg >= emu_newton and rows["fem"][2].split("/")[1].strip() == "0"
+    # the phases are parts of the solve time (their sum is the solve time, up to rounding)
+    for r in rows.values():
+        assert abs(sum(float(c) for c in r[5:11]) - float(r[3])) < 0.02
+    assert "EMU total (solve + estimates) / FEM:" in out

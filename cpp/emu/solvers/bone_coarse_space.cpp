@@ -12,24 +12,31 @@ BoneCoarseSpace::BoneCoarseSpace(const UnknownLayout& layout, double alpha) : la
 void BoneCoarseSpace::build(const Mat9X& F, const Follow& follow, const Product& product,
                             const std::vector<Mat9X>& extra) {
   const int nb = layout_.num_bones, nu = layout_.num_unknowns, nz = 3 * nb + static_cast<int>(extra.size());
-  Z_.assign(nz, Mat9X::Zero(9, nu));
-  HZ_.resize(nz);
+  std::vector<Mat9X> Z(nz, Mat9X::Zero(9, nu)), HZ(nz);
   for (int b = 0; b < nb; ++b)
     for (int k = 0; k < 3; ++k) {
-      Mat9X& Z = Z_[3 * b + k];
+      Mat9X& Zk = Z[3 * b + k];
       const int ub = layout_.num_soft + b;
       Mat3 W = Mat3::Zero();  // [e_k]_x
       W((k + 2) % 3, (k + 1) % 3) = 1.0;
       W((k + 1) % 3, (k + 2) % 3) = -1.0;
-      Z.col(ub) = flatten(Mat3(W * unflatten(F.col(ub))));
-      follow(Z);
+      Zk.col(ub) = flatten(Mat3(W * unflatten(F.col(ub))));
+      follow(Zk);
     }
-  for (size_t e = 0; e < extra.size(); ++e) Z_[3 * nb + e] = extra[e];
+  for (size_t e = 0; e < extra.size(); ++e) Z[3 * nb + e] = extra[e];
   Eigen::MatrixXd E(nz, nz);
   for (int j = 0; j < nz; ++j) {
-    product(Z_[j], HZ_[j]);
-    for (int i = 0; i < nz; ++i) E(i, j) = dot(Z_[i], HZ_[j]);
+    product(Z[j], HZ[j]);
+    for (int i = 0; i < nz; ++i) E(i, j) = dot(Z[i], HZ[j]);
   }
+  const Eigen::Index entries = 9 * static_cast<Eigen::Index>(nu);
+  Z_.resize(entries, nz);
+  HZ_.resize(entries, nz);
+  for (int j = 0; j < nz; ++j) {
+    Z_.col(j) = flat(Z[j]);
+    HZ_.col(j) = flat(HZ[j]);
+  }
+  parts_.resize(nz, kSumChunks);
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (E + E.transpose()));
   double scale = std::numeric_limits<double>::infinity();
   for (int u = layout_.num_soft; u < nu; ++u) {
@@ -56,6 +63,32 @@ void BoneCoarseSpace::build(const Mat9X& F, const Follow& follow, const Product&
     neutral_.push_back({best, v.segment<3>(3 * best).normalized()});
   }
   built_ = true;
+}
+
+void BoneCoarseSpace::project(const Eigen::MatrixXd& M, const Mat9X& v, Eigen::VectorXd& c) const {
+  const Eigen::Index n = M.rows();
+  const Flat x = flat(v);
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < kSumChunks; ++k) {
+    const Eigen::Index lo = n * k / kSumChunks, hi = n * (k + 1) / kSumChunks;
+    parts_.col(k).noalias() = M.middleRows(lo, hi - lo).transpose() * x.segment(lo, hi - lo);
+  }
+  c = parts_.col(0);
+  for (int k = 1; k < kSumChunks; ++k) c += parts_.col(k);
+}
+
+void BoneCoarseSpace::combine(const Mat9X& a, double s, const Eigen::MatrixXd& M, const Eigen::VectorXd& c,
+                              Mat9X& out) {
+  if (&out != &a) out.resize(a.rows(), a.cols());
+  const Eigen::Index n = M.rows();
+  const Flat x = flat(a);
+  auto y = flat(out);
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < kSumChunks; ++k) {
+    const Eigen::Index lo = n * k / kSumChunks, hi = n * (k + 1) / kSumChunks;
+    if (&out != &a) y.segment(lo, hi - lo) = x.segment(lo, hi - lo);
+    y.segment(lo, hi - lo).noalias() += s * (M.middleRows(lo, hi - lo) * c);
+  }
 }
 
 }  // namespace emu

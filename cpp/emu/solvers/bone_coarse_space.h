@@ -22,6 +22,7 @@
 
 #include <Eigen/Core>
 
+#include "emu/linalg/chunked_sum.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
 #include "emu/solvers/newton/result.h"
@@ -51,38 +52,48 @@ class BoneCoarseSpace {
 
  private:
   static double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
+  using Flat = Eigen::Map<const Eigen::VectorXd>;
+  static Flat flat(const Mat9X& v) { return Flat(v.data(), v.size()); }
+  static Eigen::Map<Eigen::VectorXd> flat(Mat9X& v) { return Eigen::Map<Eigen::VectorXd>(v.data(), v.size()); }
+  /// c = M^T v (M: #entries by nz), per fixed chunk of rows then over the
+  /// chunks in order: the same bits for any number of threads.
+  void project(const Eigen::MatrixXd& M, const Mat9X& v, Eigen::VectorXd& c) const;
+  /// out = a + s M c over the entries (a may be out), in parallel.
+  static void combine(const Mat9X& a, double s, const Eigen::MatrixXd& M, const Eigen::VectorXd& c, Mat9X& out);
+
   const UnknownLayout& layout_;
   double alpha_;
-  std::vector<Mat9X> Z_, HZ_;
+  // Z and H Z, one column per coarse direction (vec of its 9 x #unknowns
+  // array): an application streams each once per use, not once per column.
+  Eigen::MatrixXd Z_, HZ_;
   Eigen::MatrixXd inv_;  // pseudo-inverse of Z^T H Z
   bool built_ = false, balancing_ = false;
   std::vector<NeutralMode> neutral_;
   mutable Mat9X r1_;
+  mutable Eigen::MatrixXd parts_;  // nz by kSumChunks partial projections
+  mutable Eigen::VectorXd c1_, c2_;
 };
 
 template <class Base>
 void BoneCoarseSpace::apply(const Mat9X& in, Mat9X& out, Base&& base) const {
-  const size_t nz = Z_.size();
   if (!built_) {
     base(in, out);
     return;
   }
-  Eigen::VectorXd zr(nz);
   if (balancing_) {
-    for (size_t i = 0; i < nz; ++i) zr(i) = dot(Z_[i], in);
-    const Eigen::VectorXd c1 = inv_ * zr;
-    r1_ = in;
-    for (size_t i = 0; i < nz; ++i) r1_ -= c1(i) * HZ_[i];
+    project(Z_, in, c2_);
+    c1_.noalias() = inv_ * c2_;  // c1 = (Z^T H Z)^-1 Z^T r
+    combine(in, -1.0, HZ_, c1_, r1_);  // r1 = r - H Z c1
     base(r1_, out);
-    for (size_t i = 0; i < nz; ++i) zr(i) = dot(HZ_[i], out);
-    const Eigen::VectorXd c2 = inv_ * zr;
-    for (size_t i = 0; i < nz; ++i) out += (c1(i) - c2(i)) * Z_[i];
+    project(HZ_, out, c2_);
+    c1_.noalias() -= inv_ * c2_;  // c1 - c2, c2 = (Z^T H Z)^-1 (H Z)^T B r1
+    combine(out, 1.0, Z_, c1_, out);
     return;
   }
   base(in, out);
-  for (size_t i = 0; i < nz; ++i) zr(i) = dot(Z_[i], in);
-  const Eigen::VectorXd c = inv_ * zr;
-  for (size_t i = 0; i < nz; ++i) out += c(i) * Z_[i];
+  project(Z_, in, c2_);
+  c1_.noalias() = inv_ * c2_;
+  combine(out, 1.0, Z_, c1_, out);
 }
 
 }  // namespace emu

@@ -275,7 +275,7 @@ void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v,
   if (layout_.num_bones == 0) {  // one unknown per tet: one fused pass
     out.resize(9, m);
 #pragma omp parallel for schedule(static)
-    for (Eigen::Index t = 0; t < m; ++t) out.col(t) = A[t] * v.col(t) - (emu_.alpha * wv(t)) * Fd.col(t);
+    for (Eigen::Index t = 0; t < m; ++t) out.col(t) = A[t].lazyProduct(v.col(t)) - (emu_.alpha * wv(t)) * Fd.col(t);
     return;
   }
 #pragma omp parallel for schedule(static)
@@ -283,7 +283,7 @@ void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v,
   reduce_to_unknowns(layout_, Fd, out);
   const long nu = layout_.num_unknowns;
 #pragma omp parallel for schedule(static)
-  for (long u = 0; u < nu; ++u) out.col(u) = A[u] * v.col(u) - out.col(u);
+  for (long u = 0; u < nu; ++u) out.col(u) = A[u].lazyProduct(v.col(u)) - out.col(u);
 }
 
 Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {

@@ -34,7 +34,7 @@ void apply_schur_form(const UnknownLayout& layout, const AcapOperator& acap, con
   const long n = r.cols();
   out.resize(9, n);
 #pragma omp parallel for schedule(static)
-  for (long u = 0; u < n; ++u) out.col(u).noalias() = Ainv[u] * r.col(u);
+  for (long u = 0; u < n; ++u) out.col(u).noalias() = Ainv[u].lazyProduct(r.col(u));
   if (blocks_only) return;
   acap.apply_C(per_tet_view(layout, out, w.per_tet), w.y);
   middle(w.y, w.u);
@@ -45,7 +45,7 @@ void apply_schur_form(const UnknownLayout& layout, const AcapOperator& acap, con
     ct = &w.per_unknown;
   }
 #pragma omp parallel for schedule(static)
-  for (long u = 0; u < n; ++u) out.col(u).noalias() += s * (Ainv[u] * ct->col(u));
+  for (long u = 0; u < n; ++u) out.col(u).noalias() += s * Ainv[u].lazyProduct(ct->col(u));
 }
 
 }  // namespace emu
