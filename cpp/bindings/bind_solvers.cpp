@@ -143,6 +143,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("max_iterations", &SolverOptions::max_iterations)
       .def_readwrite("rtol_grad", &SolverOptions::rtol_grad)
       .def_readwrite("rtol_energy", &SolverOptions::rtol_energy)
+      .def_readwrite("noise_factor", &SolverOptions::noise_factor)
       .def_readwrite("armijo", &SolverOptions::armijo)
       .def_readwrite("step_tol", &SolverOptions::step_tol)
       .def_readwrite("step_tol_grad", &SolverOptions::step_tol_grad)

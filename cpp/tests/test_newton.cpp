@@ -1,4 +1,6 @@
 // The Newton driver and PCG on small problems with known answers.
+#include <cstdint>
+#include <cstring>
 #include <random>
 
 #include <Eigen/Dense>
@@ -7,6 +9,7 @@
 #include "emu/solvers/newton/newton_driver.h"
 #include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
+#include "emu/solvers/newton/rounding_perturbation.h"
 
 using namespace emu;
 
@@ -15,11 +18,19 @@ namespace {
 struct ConvexProblem {
   Eigen::MatrixXd Q;
   Eigen::VectorXd c, x, d, g;
+  double noise = 0;  // amplitude of a rounding-like error in grad: a fresh sample for any change of y
   bool fail_direction_at = false;
   int fail_iteration = -1;
   double f(const Eigen::VectorXd& y) const { return y.array().exp().sum() - c.dot(y) + 0.5 * y.dot(Q * y); }
   Eigen::VectorXd grad(const Eigen::VectorXd& y) const {
-    return Eigen::VectorXd(y.array().exp()) - c + Q * y;
+    Eigen::VectorXd out = Eigen::VectorXd(y.array().exp()) - c + Q * y;
+    for (Eigen::Index i = 0; noise > 0 && i < y.size(); ++i) {
+      std::uint64_t bits;
+      std::memcpy(&bits, &y(i), sizeof bits);
+      bits = (bits + static_cast<std::uint64_t>(i)) * 0x9E3779B97F4A7C15ull;
+      out(i) += noise * (static_cast<double>(bits >> 11) * 0x1p-52 - 1.0);  // uniform in [-1, 1)
+    }
+    return out;
   }
   double energy() const { return f(x); }
   double grad_norm() const { return grad(x).norm(); }
@@ -39,6 +50,11 @@ struct ConvexProblem {
     return f(x + s * d);
   }
   double trial_grad_norm() const { return grad(x + last_s * d).norm(); }
+  double gradient_noise() {
+    Eigen::VectorXd x1 = x;
+    perturb_by_rounding(x1);
+    return (grad(x1) - grad(x)).norm() / std::sqrt(2.0);
+  }
   double take_step(int, double s, double) {
     x += s * d;
     return f(x);
@@ -188,6 +204,35 @@ TEST(newton_driver_stalls_when_no_step_helps) {
   CHECK(!r.converged);
   CHECK(r.status.rfind("stalled", 0) == 0);
   CHECK(r.iterations == 0);
+}
+
+TEST(newton_driver_stops_at_the_gradients_measured_round_off) {
+  // A gradient with a rounding-like error of 1e-6 (a fresh sample for every
+  // rounding of x), far above rtol_grad |g_0|: without the noise floor no
+  // iterate meets the test; with it the solve stops near the minimiser and
+  // says why.
+  ConvexProblem exact = make_problem(6);
+  SolveResult r_exact;
+  newton_minimize(exact, SolverOptions(), 1e-14, Clock::now(), r_exact);
+  CHECK(r_exact.converged && r_exact.status == "converged");
+  for (double factor : {0.0, 2.0}) {
+    ConvexProblem p = make_problem(6);
+    p.noise = 1e-6;
+    SolverOptions o;
+    o.rtol_grad = 1e-12;
+    o.noise_factor = factor;
+    o.max_iterations = 40;
+    SolveResult r;
+    newton_minimize(p, o, 1e-14, Clock::now(), r);
+    if (factor == 0) {
+      CHECK(!r.converged);
+    } else {
+      CHECK(r.converged && r.status == "converged: the gradient is at its round-off level");
+      CHECK(r.iterations < 15);
+      CHECK((p.x - exact.x).norm() < 1e-5);
+      CHECK(r.grad_norm > 1e-12 * r.grad_norm0);  // not the plain test
+    }
+  }
 }
 
 TEST(lbfgs_meets_the_secant_equation_and_skips_pairs_without_curvature) {

@@ -54,6 +54,12 @@ CORRECTION_CONTRACTION = 0.3
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
 # ... and the step test applies once |g| <= STEP_GRAD |g_0| (measured: docs/DESIGN.md)
 STEP_GRAD = 1e-2
+# EMU's strict solves (no accuracy) also stop when a full step moves no vertex
+# by more than POSITION_TOL x the bounding-box diagonal, once |g| <=
+# POSITION_TOL_GRAD |g_0|: with bones the gradient's round-off (the fit's
+# conditioning) can sit within a few times rtol_grad |g_0|, and the steps that
+# chase it change the answer in its 7th or 8th digit (docs/DESIGN.md, "The gradient's round-off").
+POSITION_TOL, POSITION_TOL_GRAD = 1e-7, 1e-3
 # L-BFGS keeps its initial inverse (the Woodbury preconditioner) this many
 # steps: its curvature pairs make up for the lag (measured: docs/DESIGN.md)
 LBFGS_REFRESH = 20
@@ -186,6 +192,14 @@ class Solver:
                   ``lbfgs_memory`` pairs; measured against Newton-Krylov in docs/DESIGN.md)
     rtol_grad     stop when |g| <= rtol_grad |g_0| ...
     rtol_energy   ... and the last energy decrease <= rtol_energy x total decrease
+    position_tol  EMU without ``accuracy``: ... or when a full step moves no vertex by more
+                  than position_tol x the bounding-box diagonal, once |g| <= 1e-3 |g_0| (the
+                  positions converged to about 7 digits; 0 turns it off)
+    noise_factor  ... or when |g| <= noise_factor x the gradient's round-off, measured in
+                  the endgame (|g| <= 1e-3 |g_0|) from the gradient at the iterate moved by
+                  one rounding (status "converged: the gradient is at its round-off level");
+                  0 turns it off. EMU with bones needs it: its fit's conditioning can lift
+                  the round-off above rtol_grad |g_0| (docs/DESIGN.md)
     max_iterations  per solve
     preconditioner  Newton-Krylov's preconditioner: "woodbury" (the paper's approximation through
                   k modes, no factorisation after setup), "schur" (exact inverse of the filtered
@@ -252,6 +266,7 @@ class Solver:
 
     def __init__(self, scene: Scene, method: str = "emu", *, alpha: float | None = None, modes: int = 24,
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
+                 noise_factor: float = 2.0, position_tol: float = POSITION_TOL,
                  max_iterations: int | None = None, cg_max_iterations: int = 500, cg_model_decrease: float = 0.5,
                  preconditioner: str = "constant-schur",
                  preconditioner_refresh: int | None = None, bone_coarse_space: bool = True,
@@ -270,6 +285,11 @@ class Solver:
         for name, v in (("alpha", alpha), ("rtol_grad", rtol_grad), ("rtol_energy", rtol_energy)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if not (isinstance(position_tol, (int, float)) and math.isfinite(position_tol) and 0 <= position_tol < 1):
+            raise ValueError(f"position_tol is a vertex motion relative to the bounding-box diagonal in [0, 1) "
+                             f"(0: off), got {position_tol!r}")
+        if not (isinstance(noise_factor, (int, float)) and math.isfinite(noise_factor) and noise_factor >= 0):
+            raise ValueError(f"noise_factor must be a number >= 0 (0: off), got {noise_factor!r}")
         if int(modes) < 0:
             raise ValueError(f"modes must be >= 0, got {modes}")
         if threads is not None:
@@ -287,6 +307,7 @@ class Solver:
         self._model_tets = scene.model_tets
         opts = _core.SolverOptions()
         opts.rtol_grad, opts.rtol_energy = float(rtol_grad), float(rtol_energy)
+        opts.noise_factor = float(noise_factor)
         opts.exact_when_definite = bool(exact_when_definite)
         if eigen_filter not in EIGEN_FILTERS:
             raise ValueError(f"eigen_filter must be one of {EIGEN_FILTERS}, got {eigen_filter!r}")
@@ -300,8 +321,13 @@ class Solver:
         if self.accuracy is not None:
             opts.step_tol = float(step_fraction) * self.accuracy * bbox_diagonal(scene.points)
             opts.step_tol_grad = STEP_GRAD
+        elif method == "emu" and position_tol > 0:
+            opts.step_tol = float(position_tol) * bbox_diagonal(scene.points)
+            opts.step_tol_grad = POSITION_TOL_GRAD
         self.mu_ref = scene.reference_shear_modulus()
-        self.settings = dict(method=method, rtol_grad=rtol_grad, rtol_energy=rtol_energy, eigen_filter=eigen_filter,
+        self.settings = dict(method=method, rtol_grad=rtol_grad, rtol_energy=rtol_energy,
+                             noise_factor=float(noise_factor), position_tol=float(position_tol),
+                             eigen_filter=eigen_filter,
                              step_fraction=float(step_fraction),
                              max_iterations=int(max_iterations), accuracy=self.accuracy)
         if lagged_factor:

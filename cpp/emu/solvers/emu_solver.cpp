@@ -14,6 +14,7 @@
 #include "emu/solvers/newton/newton_driver.h"
 #include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
+#include "emu/solvers/newton/rounding_perturbation.h"
 
 namespace emu {
 namespace {
@@ -710,6 +711,28 @@ class EmuSolver::Newton {
     s_.retract(F_, d_, 1.0, F1);
     s_.fit_into(c_, F1, x1, Fx1);
     return s_.options_.contact.max_step(x_, x1);
+  }
+ public:
+  /// The round-off of grad_norm() here: |gR(F') - gR(F)| / sqrt 2, F' = F
+  /// moved by one rounding per entry, both from a fresh fit (two samples of
+  /// the rounding errors). With bones the fit's conditioning lifts it far
+  /// above gradient_floor's scale bound.
+  double gradient_noise() {
+    Mat9X g, g1, F1 = F_;
+    perturb_by_rounding(F1);
+    riemannian_gradient_at(F_, g);
+    riemannian_gradient_at(F1, g1);
+    return (g1 - g).norm() / std::sqrt(2.0);
+  }
+
+ private:
+  void riemannian_gradient_at(const Mat9X& F, Mat9X& g) const {
+    Eigen::MatrixX3d x;
+    Mat9X Fx;
+    s_.fit_into(c_, F, x, Fx);
+    s_.gradient_into(c_, F, Fx, g);
+    s_.add_contact_gradient(x, g);
+    if (bones_) s_.project_tangent(F, g);
   }
   void update_gradient() {
     s_.gradient_into(c_, F_, Fx_, g_);

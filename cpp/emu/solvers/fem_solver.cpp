@@ -13,6 +13,7 @@
 #include "emu/linalg/symmetric_product.h"
 #include "emu/solvers/newton/pcg.h"
 #include "emu/solvers/newton/newton_driver.h"
+#include "emu/solvers/newton/rounding_perturbation.h"
 
 namespace emu {
 
@@ -334,6 +335,16 @@ class FemSolver::Newton {
 
   /// The positions of the last trial_energy call.
   const Eigen::MatrixX3d& trial_positions() const { return trial_; }
+
+  /// The round-off of grad_norm() here: the change of the reduced gradient
+  /// when every position moves by one rounding, over sqrt 2 (two samples).
+  double gradient_noise() {
+    Eigen::MatrixX3d x1 = x_;
+    perturb_by_rounding(x1);
+    Eigen::VectorXd gs1, gb1;
+    reduced_gradient(x1, poses_, gs1, gb1);
+    return s_.bones_.gradient_norm((gs1 - gs_).squaredNorm(), gb1 - gb_) / std::sqrt(2.0);
+  }
 
   double trial_grad_norm() {  // at the trial point of the last trial_energy call
     Eigen::VectorXd gs1, gb1;

@@ -15,9 +15,11 @@
 //                                               // its hessian / preconditioner / linear_solve seconds
 //   double trial_energy(double s);              // energy at step s along it (non-finite: rejected)
 //   double trial_grad_norm();                   // gradient norm at the last trial point (round-off rule)
+//   double gradient_noise();                    // round-off of grad_norm() at the current iterate
 //   double take_step(int iteration, double s, double E_trial);  // move to the step s of the last
 //                                                               // trial_energy call; returns the new energy
 //   const Eigen::MatrixX3d& positions() const;  // #V by 3 (only for SolverOptions::on_iteration)
+#include <algorithm>
 #include <string>
 
 #include "emu/solvers/newton/convergence.h"
@@ -44,6 +46,10 @@ struct SearchDirection {
     return *this;
   }
 };
+
+/// The gradient's round-off is measured at the iterates in the endgame:
+/// |g| <= max(kNoiseFrom |g_0|, kNoiseBand rtol_grad |g_0|).
+constexpr double kNoiseFrom = 1e-3, kNoiseBand = 100.0;
 
 /// Minimises the problem from its current iterate; fills every field of res
 /// but positions, F and the neutral modes (the problem's own output).
@@ -111,9 +117,15 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     res.iterations = it;
     res.cg_iterations += d.cg_iterations;
     res.history.push_back({it, E, gn, ls.step, seconds_since(t0), d.cg_iterations, ls.backtracks});
+    // In the endgame the gradient's measured round-off joins the floor: a
+    // gradient within noise_factor of it is as good as zero (further steps
+    // chase rounding errors; docs/DESIGN.md, "The gradient's round-off").
+    const double tol = o.rtol_grad * conv.g0;
+    if (o.noise_factor > 0 && gn > tol && gn > conv.floor && gn <= std::max(kNoiseFrom * conv.g0, kNoiseBand * tol))
+      conv.floor = std::max(conv.floor, o.noise_factor * p.gradient_noise());
     if (conv.test(E_prev, E, gn)) {
       res.converged = true;
-      res.status = "converged";
+      res.status = gn > tol ? "converged: the gradient is at its round-off level" : "converged";
     } else if (o.step_tol > 0 && ls.step == 1.0 && gn <= o.step_tol_grad * conv.g0 &&
                (p.positions() - x_prev).rowwise().norm().maxCoeff() <= o.step_tol) {
       // A full Newton step this short: the remaining distance is about as
