@@ -64,6 +64,35 @@ TEST(cholmod_solve_matches_dense) {
   CHECK((sol - 0.5 * ref).norm() <= 1e-9 * ref.norm());
 }
 
+TEST(cholmod_simplicial_factor_solves_and_refactorises_like_the_supernodal_one) {
+  std::vector<int> p, i;
+  std::vector<double> x;
+  Eigen::MatrixXd K;
+  grid_laplacian(30, 0.01, p, i, x, K);
+  const int n = static_cast<int>(K.rows());
+  CholmodFactor f;
+  f.analyze(n, p.data(), i.data());
+  CHECK(f.factorize(x.data()) && !f.simplicial());
+  const Eigen::MatrixXd b = Eigen::MatrixXd::Random(n, 3);
+  Eigen::MatrixXd super(n, 3), simple(n, 3);
+  f.solve(b.data(), super.data(), 3);
+  f.make_simplicial();
+  CHECK(f.simplicial() && f.factor_nnz() > n);
+  f.solve(b.data(), simple.data(), 3);
+  const Eigen::MatrixXd ref = K.llt().solve(b);
+  CHECK((simple - ref).norm() <= 1e-9 * ref.norm());
+  CHECK((simple - super).norm() <= 1e-12 * ref.norm());
+  // a copy of its pattern (ConstantSchur's analyze_like) and a refactorisation stay simplicial and right
+  CholmodFactor g;
+  g.analyze_like(f);
+  for (double& v : x) v *= 2.0;
+  CHECK(g.factorize(x.data()) && g.simplicial());
+  g.solve(b.data(), simple.data(), 3);
+  CHECK((simple - 0.5 * ref).norm() <= 1e-9 * ref.norm());
+  for (double& v : x) v = -v;  // negative definite: reported, as for the supernodal factor
+  CHECK(!g.factorize(x.data()));
+}
+
 TEST(symmetric_upper_product_matches_dense) {
   // A random symmetric matrix on the grid pattern (diagonal and off-diagonal
   // entries of mixed sign), stored as its upper triangle.

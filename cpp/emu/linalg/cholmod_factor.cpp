@@ -15,6 +15,9 @@ void record_error(int status, const char* /*file*/, int /*line*/, const char* me
 CholmodFactor::CholmodFactor() {
   cholmod_start(&common_);
   common_.supernodal = CHOLMOD_SUPERNODAL;
+  // A simplicial factor (make_simplicial) refactorises as LL', not LDL': an
+  // indefinite matrix is then reported, as by the supernodal factorisation.
+  common_.final_ll = 1;
   // Orderings tried: AMD and METIS, the one with less fill kept. By default
   // CHOLMOD tries METIS only where AMD's flops per factor entry exceed 500; the
   // ACAP matrix of a compact 3D mesh stays under that while METIS's nested
@@ -86,6 +89,13 @@ bool CholmodFactor::factorize(const double* values) {
   check("factorize");
   factorized_ = true;
   return true;
+}
+
+void CholmodFactor::make_simplicial() {
+  if (!factorized_ || n_ == 0 || !L_->is_super) return;
+  // xtype real, LL' (not LDL'), simplicial, packed, monotonic
+  cholmod_change_factor(CHOLMOD_REAL, /*to_ll*/ 1, /*to_super*/ 0, /*to_packed*/ 1, /*to_monotonic*/ 1, L_, &common_);
+  check("change_factor");
 }
 
 void CholmodFactor::solve(const double* b, double* x, int nrhs) const {

@@ -27,11 +27,19 @@ class CholmodFactor {
   /// order of row_index. Returns false if the matrix is not positive definite.
   bool factorize(const double* values);
 
+  /// Converts the (factorised) supernodal factor to a simplicial LL': for a
+  /// factor solved many times and never refactorised, whose supernodes are
+  /// small (a few thousand rows), where the simplicial solve skips CHOLMOD's
+  /// per-supernode BLAS calls (docs/DESIGN.md, "The cost of an iteration").
+  /// A later factorize refactorises it simplicially.
+  void make_simplicial();
+
   /// x = A^-1 b for nrhs right-hand sides; b and x are n x nrhs column-major
   /// (they may alias).
   void solve(const double* b, double* x, int nrhs) const;
 
   int rows() const { return n_; }
+  bool simplicial() const { return L_ && !L_->is_super; }
   bool factorized() const { return factorized_; }
   double factor_nnz() const;
   /// Entries of A (upper triangle) as analysed.

@@ -3,8 +3,9 @@
 // schur_preconditioner.h, constant_schur.h): with the per-unknown block
 // inverses A^-1 and a position-space middle operator P,
 //   out = A^-1 r + s A^-1 C^T P (C A^-1 r),
-// where P is X^-1 through the k modes (Woodbury, s = 1), S^-1 (Schur) or
-// S0^-1 (constant Schur), both with s = alpha. Two block passes, one
+// where P is X^-1 through the k modes (Woodbury, s = 1), S^-1 (Schur,
+// s = alpha) or the factor of K for S0 = c K (constant Schur, s = alpha / c).
+// Two block passes, one
 // right-hand side C A^-1 r (#dofs by 3) for P, one C^T of P's answer.
 #include <vector>
 
