@@ -155,7 +155,7 @@ def test_sweep_small(tmp_path):
 
 
 def test_demo_phases_small():
-    out = run(BENCH / "demo_phases.py", "--resolution", "2", "--frames", "4")   # 3 frames: all at zero activation
+    out = run(BENCH / "demo_phases.py", "--resolution", "2", "--frames", "4")   # (with 3 frames every activation is 0)
     rows = {line.split("|")[1].strip(): line.split("|") for line in out.splitlines() if line.startswith("| f")
             or line.startswith("| e")}
     assert set(rows) == {"fem", "emu"}

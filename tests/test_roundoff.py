@@ -35,10 +35,14 @@ def test_position_tol_stops_within_its_distance_of_the_strict_answer(arm):
     assert loose.settings["position_tol"] == 1e-3
 
 
-def test_position_tol_is_emu_strict_only(arm):
-    # FEM and EMU's accuracy mode keep their own tests (the setting is recorded, not applied)
-    fem = emu.Solver(arm, "fem", rtol_grad=1e-14, position_tol=1e-3, noise_factor=0).solve(ACT, normalized=True)
-    assert fem.status != STEP_STATUS
+def test_position_tol_is_emu_newton_krylov_strict_only(arm):
+    # FEM, EMU's accuracy mode and the slowly converging steps keep their own tests
+    fem = emu.Solver(arm, "fem", rtol_grad=1e-14, position_tol=1e-3, noise_factor=0)
+    assert fem.solve(ACT, normalized=True).status != STEP_STATUS
+    for solver in (fem, emu.Solver(arm, "emu", accuracy=0.01, position_tol=1e-3),
+                   emu.Solver(arm, "emu", alpha=300, step="woodbury", position_tol=1e-3)):
+        assert solver.settings["position_tol"] is None   # not applied
+    assert emu.Solver(arm, "emu", alpha=300).settings["position_tol"] == 1e-7
 
 
 @pytest.mark.parametrize("kw", [dict(position_tol=-1e-8), dict(position_tol=1.0), dict(position_tol=math.nan),

@@ -65,6 +65,12 @@ def test_scene_file_solver_options_reach_the_solver(tmp_path):
     assert fem.settings["fem_correction"] is False   # an EMU option: FEM has none
     with pytest.raises(SceneFileError, match="solver.fem_correction"):
         load_scene_file(write(tmp_path, GOOD.replace('alpha = 100.0', 'fem_correction = "yes"'), "bad.toml"))
+    # the stopping and CG options of later stops too
+    text = GOOD.replace('alpha = 100.0', 'alpha = 100.0\nnoise_factor = 0\nposition_tol = 1e-6\n'
+                        'cg_model_decrease = 0.25')
+    solver = emu.Solver(load_scene_file(write(tmp_path, text, "late.toml")).scene,
+                        **load_scene_file(write(tmp_path, text, "late.toml")).solver)
+    assert (solver.settings["noise_factor"], solver.settings["position_tol"]) == (0.0, 1e-6)
 
 
 def test_fusiform_mesh_is_the_built_in_scene(tmp_path):

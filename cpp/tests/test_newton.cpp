@@ -235,6 +235,31 @@ TEST(newton_driver_stops_at_the_gradients_measured_round_off) {
   }
 }
 
+TEST(newton_driver_measures_the_round_off_of_a_warm_start_that_stalls) {
+  // Started at the minimiser with the same noisy gradient: |g_0| is the noise
+  // itself, the endgame band (relative to |g_0|) is never entered, and no step
+  // lowers the energy. The stall is measured: converged at round-off, not "stalled".
+  ConvexProblem exact = make_problem(6);
+  SolveResult r_exact;
+  newton_minimize(exact, SolverOptions(), 1e-14, Clock::now(), r_exact);
+  for (double factor : {0.0, 2.0}) {
+    ConvexProblem p = make_problem(6);
+    p.x = exact.x;
+    p.noise = 1e-6;
+    SolverOptions o;
+    o.noise_factor = factor;
+    o.max_iterations = 40;
+    SolveResult r;
+    newton_minimize(p, o, 1e-14, Clock::now(), r);
+    if (factor == 0) {
+      CHECK(!r.converged);
+    } else {
+      CHECK(r.converged && r.status == "converged: the gradient is at its round-off level");
+      CHECK((p.x - exact.x).norm() < 1e-5);
+    }
+  }
+}
+
 TEST(lbfgs_meets_the_secant_equation_and_skips_pairs_without_curvature) {
   std::mt19937 rng(11);
   std::normal_distribution<double> nd(0.0, 1.0);

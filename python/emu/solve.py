@@ -192,14 +192,16 @@ class Solver:
                   ``lbfgs_memory`` pairs; measured against Newton-Krylov in docs/DESIGN.md)
     rtol_grad     stop when |g| <= rtol_grad |g_0| ...
     rtol_energy   ... and the last energy decrease <= rtol_energy x total decrease
-    position_tol  EMU without ``accuracy``: ... or when a full step moves no vertex by more
-                  than position_tol x the bounding-box diagonal, once |g| <= 1e-3 |g_0| (the
-                  positions converged to about 7 digits; 0 turns it off)
+    position_tol  EMU Newton-Krylov without ``accuracy``: ... or when a full step moves no
+                  vertex by more than position_tol x the bounding-box diagonal, once |g| <=
+                  1e-3 |g_0| (the positions converged to about 7 digits; 0 turns it off;
+                  settings["position_tol"] is None where it does not apply)
     noise_factor  ... or when |g| <= noise_factor x the gradient's round-off, measured in
-                  the endgame (|g| <= 1e-3 |g_0|) from the gradient at the iterate moved by
-                  one rounding (status "converged: the gradient is at its round-off level");
-                  0 turns it off. EMU with bones needs it: its fit's conditioning can lift
-                  the round-off above rtol_grad |g_0| (docs/DESIGN.md)
+                  the endgame (|g| <= max(1e-3, 100 rtol_grad) |g_0|, and before a solve
+                  would stop as stalled) from the gradient at the iterate moved by one
+                  rounding (status "converged: the gradient is at its round-off level");
+                  0 turns it off. EMU with bones needs it: its fit's conditioning can bring
+                  the round-off within a few times rtol_grad |g_0| (docs/DESIGN.md)
     max_iterations  per solve
     preconditioner  Newton-Krylov's preconditioner: "woodbury" (the paper's approximation through
                   k modes, no factorisation after setup), "schur" (exact inverse of the filtered
@@ -321,12 +323,19 @@ class Solver:
         if self.accuracy is not None:
             opts.step_tol = float(step_fraction) * self.accuracy * bbox_diagonal(scene.points)
             opts.step_tol_grad = STEP_GRAD
-        elif method == "emu" and position_tol > 0:
+            position_tol = None   # accuracy mode's own step test applies
+        elif method == "emu" and step == "newton-krylov" and position_tol > 0:
+            # (Newton-Krylov only: its steps contract by at least half, so a
+            # short full step bounds the distance left; the Woodbury and L-BFGS
+            # steps converge slowly and linearly)
             opts.step_tol = float(position_tol) * bbox_diagonal(scene.points)
             opts.step_tol_grad = POSITION_TOL_GRAD
+        else:
+            position_tol = None   # not applied: recorded as such
         self.mu_ref = scene.reference_shear_modulus()
         self.settings = dict(method=method, rtol_grad=rtol_grad, rtol_energy=rtol_energy,
-                             noise_factor=float(noise_factor), position_tol=float(position_tol),
+                             noise_factor=float(noise_factor),
+                             position_tol=None if position_tol is None else float(position_tol),
                              eigen_filter=eigen_filter,
                              step_fraction=float(step_fraction),
                              max_iterations=int(max_iterations), accuracy=self.accuracy)

@@ -1,5 +1,6 @@
 #pragma once
-// One RAII, non-copyable owner of a CHOLMOD supernodal Cholesky factor.
+// One RAII, non-copyable owner of a CHOLMOD supernodal Cholesky factor
+// (simplicial after make_simplicial).
 // Symbolic analysis (fill-reducing ordering) happens once per pattern;
 // numeric factorisations and solves reuse it.
 #include <string>

@@ -716,11 +716,13 @@ class EmuSolver::Newton {
   /// The round-off of grad_norm() here: |gR(F') - gR(F)| / sqrt 2, F' = F
   /// moved by one rounding per entry, both from a fresh fit (two samples of
   /// the rounding errors). With bones the fit's conditioning lifts it far
-  /// above gradient_floor's scale bound.
+  /// above gradient_floor's scale bound; there the iterate's own fit is fresh
+  /// (take_step swaps in the trial's), without bones it is updated linearly.
   double gradient_noise() {
     Mat9X g, g1, F1 = F_;
     perturb_by_rounding(F1);
-    riemannian_gradient_at(F_, g);
+    if (bones_) g = gR_;
+    else riemannian_gradient_at(F_, g);
     riemannian_gradient_at(F1, g1);
     return (g1 - g).norm() / std::sqrt(2.0);
   }

@@ -342,7 +342,9 @@ class FemSolver::Newton {
     Eigen::MatrixX3d x1 = x_;
     perturb_by_rounding(x1);
     Eigen::VectorXd gs1, gb1;
+    const Eigen::MatrixX3d fv = fv_;  // reduced_gradient rewrites the vertex forces the border reads
     reduced_gradient(x1, poses_, gs1, gb1);
+    fv_ = fv;
     return s_.bones_.gradient_norm((gs1 - gs_).squaredNorm(), gb1 - gb_) / std::sqrt(2.0);
   }
 

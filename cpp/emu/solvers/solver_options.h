@@ -17,9 +17,10 @@ struct SolverOptions {
   double rtol_energy = 1e-10;  // E_{k-1} - E_k <= rtol_energy (E_0 - E_k)
   // Converged also when |g| <= noise_factor times the gradient's round-off,
   // measured in the endgame (newton_driver.h: kNoiseFrom) (Problem::gradient_noise;
-  // 0: off). With bones, EMU's fit is ill-conditioned (ACAP weight 1e4) and its
-  // gradient's round-off can exceed rtol_grad |g_0| (docs/DESIGN.md, "The
-  // gradient's round-off").
+  // 0: off; also tested before a solve is declared stalled). With bones, EMU's
+  // fit is ill-conditioned (ACAP weight 1e4) and its gradient's round-off can
+  // come within a few times rtol_grad |g_0| (docs/DESIGN.md, "The gradient's
+  // round-off").
   double noise_factor = 2.0;
   // Converged also when a full step moves no vertex by more than step_tol
   // (absolute, in position units; 0: off): the accuracy-matched stopping rule,

@@ -99,6 +99,13 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     if (!ls.success) {
       const double E1 = p.trial_energy(1.0);
       if (!accept_at_roundoff(E1, p.trial_grad_norm(), E, p.grad_norm(), conv.E0)) {
+        // a warm start whose |g_0| is near the round-off never enters the
+        // endgame band: its stall is measured here
+        if (o.noise_factor > 0 && p.grad_norm() <= o.noise_factor * p.gradient_noise()) {
+          res.converged = true;
+          res.status = "converged: the gradient is at its round-off level";
+          break;
+        }
         res.status = "stalled: no step along the search direction decreases the energy or the gradient "
                      "(round-off level reached; loosen rtol_grad / rtol_energy)";
         break;
