@@ -65,6 +65,34 @@ def test_emu_answer_is_corrected_by_fem_where_its_estimate_misses():
     assert not plain.corrected and plain.positions is plain.emu_positions
 
 
+def test_a_re_solve_takes_its_alpha_from_the_closest_fem_point():
+    """Where the estimate's FEM correction x1 overshoots (the second
+    correction is longer than CORRECTION_CONTRACTION x the first, the third
+    contracts), EMU's answer is not corrected and the re-solve's alpha comes
+    from EMU's distance to the third correction x3, not to x1: the demo arm at
+    extensor 0.8 and alpha 234 mu, where x1 puts the error at 1.1e-2 and it is
+    7.4e-3 (the re-solve at the alpha x1 implies was 1.8x larger and slower)."""
+    from emu.scenes import arm
+    s = arm(3)
+    act = {"flexor": 0.0, "extensor": 8e4}
+    fem = emu.solve(s, act, "fem", rtol_grad=1e-9)
+    solver = emu.Solver(s, "emu", alpha=234.0, accuracy=0.01)
+    sol = solver.solve(act, record_iterates=True)
+    assert sol.converged and not sol.corrected and sol.settings["alpha_attempts"] == 2
+    assert emu.vertex_error(sol, fem) <= 0.01
+    # the first solve's answer: the last iterate before the re-solve's start
+    restart = np.flatnonzero(sol.history["iteration"] == 0)[1]
+    first = sol.iterates[restart - 1][1]
+    true = emu.vertex_error(first, fem)
+    raised = sol.settings["alpha"] / 234.0
+    # alpha x (error / (AIM x target))^(1 / 0.75), AIM = 0.4: from the true
+    # error within 10%, and well below what the first correction implied
+    assert raised == pytest.approx((true / 0.004) ** (4 / 3), rel=0.1)
+    # without corrections the re-solve's alpha comes from x1, which overshot
+    plain = emu.Solver(s, "emu", alpha=234.0, accuracy=0.01, fem_correction=False).solve(act)
+    assert plain.settings["alpha_attempts"] >= 2 and plain.settings["alpha"] > 1.5 * sol.settings["alpha"]
+
+
 def test_step_fraction_sets_the_stopping_rule():
     """A looser step test (step_fraction 0.3 of the target instead of the
     default 0.1) stops EMU's solve in fewer iterations; with the FEM correction

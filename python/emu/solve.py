@@ -527,10 +527,15 @@ class Solver:
         iterations, cg, histories = sol.iterations, sol.cg_iterations, [sol.history]
         phases = dict(sol.phase_times)
         while sol.converged and sol.error_estimate is not None and sol.error_estimate > ACCEPT * target:
-            factor = min(30.0, max(1.5, (sol.error_estimate / (AIM * target)) ** (1 / 0.75)))
+            own = sol.error_estimate   # a correction replaces it with its last step's length
             t0 = time.perf_counter()
-            corrected = self.fem_correction and self._correct(load, sol, target)
+            corrected, closer = self._correct(load, sol, target) if self.fem_correction else (False, None)
             estimate_s += time.perf_counter() - t0   # the correction counts as estimation time
+            # where x1 overshot (FEM's Newton not yet in its fast regime) the
+            # next alpha comes from EMU's distance to the later correction x3
+            # (docs/DESIGN.md, "Accuracy mode: FEM-corrected answers")
+            error = own if closer is None else closer
+            factor = min(30.0, max(1.5, (error / (AIM * target)) ** (1 / 0.75)))
             if corrected:
                 # this answer is FEM-corrected; the next solve (a sequence's next
                 # frame) starts at the alpha a re-solve would have used, so that
@@ -578,15 +583,17 @@ class Solver:
             self.set_alpha(max(self.alpha * 0.5, self.alpha * sol.error_estimate / (AIM * target)))
         return sol
 
-    def _correct(self, load, sol: Solution, target: float) -> bool:
-        """Accuracy mode, EMU's estimate above ACCEPT x target: one more FEM
-        Newton correction x2 of the estimate's x1; if the corrections contract
-        (|x2 - x1| <= CORRECTION_CONTRACTION |x1 - x|) to within ACCEPT x target
-        and a third correction contracts again (|x3 - x2| <= CORRECTION_CONTRACTION
-        |x2 - x1|: FEM's Newton is in its fast regime), make x2 the solution's
-        positions with |x2 - x1| as its estimate (x2 is closer than that where
-        they contract) and return True; else leave the solution as it was (the
-        caller re-solves at a larger alpha)."""
+    def _correct(self, load, sol: Solution, target: float) -> tuple:
+        """Accuracy mode, EMU's estimate above ACCEPT x target: FEM Newton
+        corrections x2 of the estimate's x1 and x3 of x2. If they contract
+        (|x2 - x1| <= CORRECTION_CONTRACTION |x1 - x|, within ACCEPT x target,
+        and |x3 - x2| <= CORRECTION_CONTRACTION |x2 - x1|: FEM's Newton is in
+        its fast regime), make x2 the solution's positions with |x2 - x1| as
+        its estimate (x2 is closer than that where they contract) and return
+        (True, None). Else leave the solution as it was (the caller
+        re-solves at a larger alpha) and return (False, |x - x3|) where only
+        the last two corrections contracted (x1 overshot; x3 is then a closer
+        FEM point than x1 to choose the next alpha by), else (False, None)."""
         def corrected(x):
             """One FEM Newton correction of x on the estimator's factor, None if it fails."""
             try:
@@ -595,24 +602,28 @@ class Solver:
                 return None
             return y if np.all(np.isfinite(y)) else None
 
-        x1, own = sol.fem_correction, sol.error_estimate   # own = vertex_error(emu_positions, x1)
+        x, x1, own = sol.positions, sol.fem_correction, sol.error_estimate   # own = vertex_error(x, x1)
         if x1 is None or (x2 := corrected(x1)) is None:
-            return False
+            return False, None
         step = vertex_error(x1, x2)
-        if not (step <= CORRECTION_CONTRACTION * own and step <= ACCEPT * target):
-            return False
+        # corrections that do not shrink, or stay longer than the target: no
+        # FEM point near enough to be worth a third
+        if not (step < own and step <= ACCEPT * target):
+            return False, None
         # A short second step is no proof by itself: from a point where FEM's
         # Newton converges only linearly (a soft valley), every step is short.
         # The next step must contract again (fusiform_20k: steps of 2.6e-4 and
         # 2.6e-4 while 2.3e-3 remained; docs/DESIGN.md).
         x3 = corrected(x2)
-        if x3 is None or vertex_error(x2, x3) > CORRECTION_CONTRACTION * step:
-            return False
+        if x3 is None or (step3 := vertex_error(x2, x3)) > CORRECTION_CONTRACTION * step:
+            return False, None
+        if step > CORRECTION_CONTRACTION * own:   # x1 overshot: EMU's answer is not corrected
+            return False, vertex_error(x, x3)
         sol.positions, sol.corrected, sol.error_estimate = x2, True, step
         sol.error_estimate_note = (f"EMU's answer (estimated {own:.2g} from FEM's) corrected by two FEM Newton "
                                    "steps; the estimate is the last step's length")
         sol.inverted_tets = len(inverted_tets(self.scene.tets, x2))
-        return True
+        return True, None
 
     def structures(self) -> dict:
         """{name: bytes} of what this solver built for its scene (per-solve work
