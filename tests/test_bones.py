@@ -89,6 +89,48 @@ def test_emu_bone_derivatives_match_finite_differences(small_arm):
         assert np.abs(fdH - Hd).max() <= 1e-5 * np.abs(fdH).max()
 
 
+@pytest.mark.parametrize("which", ["arm", "chain"])
+def test_bone_coarse_turn_matches_a_fit_of_the_turn(small_arm, which):
+    """The coarse space's turn of a bone by M (from the unit turn's fits, no
+    fit per turn) against the construction it stands for: the displacement fit
+    of the bone's field M (the difference of two affine fits), the soft F_t
+    of it, and the generic Hessian product of that Z (which fits again); one
+    bone, and two bones joined by a hinge (the joint rows in the fit)."""
+    from emu.geometry import deformation_gradients
+    s = small_arm if which == "arm" else bone_chain_scene()
+    act = {"flexor": 0.5} if which == "arm" else {"m1": 0.2, "m2": 0.2}
+    solver = emu.Solver(s, "emu", alpha=100)
+    core = solver._core
+    load = solver.load_case(act, normalized=True)
+    nu, tu = core.num_unknowns, np.asarray(core.tet_unknown)
+    nb = len(s.movable_bones)
+    ns = nu - nb
+    tets = s.tets[solver._model_tets]
+    rng = np.random.default_rng(5)
+    F = np.tile(np.eye(3).ravel(), (nu, 1)) + 0.02 * rng.standard_normal((nu, 9))
+    for b in range(nb):   # bones at rotations
+        q, _ = np.linalg.qr(np.eye(3) + 0.3 * rng.standard_normal((3, 3)))
+        F[ns + b] = (q * np.sign(np.linalg.det(q))).ravel(order="F")
+    soft = np.flatnonzero(tu < ns)
+    for b in range(nb):
+        R = F[ns + b].reshape(3, 3, order="F")
+        for k in range(3):
+            W = np.zeros((3, 3))
+            W[(k + 2) % 3, (k + 1) % 3], W[(k + 1) % 3, (k + 2) % 3] = 1.0, -1.0
+            M = W @ R
+            Z, HZ = core.bone_turn(load, F, b, M, True)
+            E = np.zeros((nu, 9))
+            E[ns + b] = M.ravel(order="F")
+            dx = core.fit_positions(load, F + E) - core.fit_positions(load, F)
+            expected = E.copy()
+            expected[tu[soft]] = deformation_gradients(s.points, tets, dx)[soft].transpose(0, 2, 1).reshape(-1, 9)
+            np.testing.assert_allclose(Z, expected, rtol=0, atol=1e-10 * np.abs(expected).max())
+            HZe = core.hessian_product(load, F, expected, True)
+            np.testing.assert_allclose(HZ, HZe, rtol=0, atol=1e-10 * np.abs(HZe).max())
+    with pytest.raises(ValueError, match="not a movable bone"):
+        core.bone_turn(load, F, nb, np.eye(3))
+
+
 def test_emu_and_fem_agree_on_the_arm_as_alpha_grows(small_arm):
     s = small_arm
     fem = emu.Solver(s, "fem").solve({"flexor": 0.3}, normalized=True)

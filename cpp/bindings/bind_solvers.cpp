@@ -295,6 +295,9 @@ void bind_solvers(py::module_& m) {
       .def("energy", &EmuSolver::energy, py::arg("load"), py::arg("F"), gil())
       .def("gradient", &EmuSolver::gradient, py::arg("load"), py::arg("F"), gil())
       .def("fit_positions", &EmuSolver::fit_positions, py::arg("load"), py::arg("F"), gil())
+      .def("bone_turn", &EmuSolver::bone_turn, py::arg("load"), py::arg("F"), py::arg("bone"), py::arg("M"),
+           py::arg("exact") = false, gil(),
+           "(Z, H Z): the bone coarse space's turn of a movable bone by the tangent M, from its unit-turn fits")
       .def("hessian_product", &EmuSolver::hessian_product, py::arg("load"), py::arg("F"), py::arg("V"),
            py::arg("exact") = false, gil())
       .def("woodbury_solve", &EmuSolver::woodbury_solve, py::arg("load"), py::arg("F"), py::arg("R"), gil())

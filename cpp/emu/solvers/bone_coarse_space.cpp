@@ -9,26 +9,24 @@ namespace emu {
 
 BoneCoarseSpace::BoneCoarseSpace(const UnknownLayout& layout, double alpha) : layout_(layout), alpha_(alpha) {}
 
-void BoneCoarseSpace::build(const Mat9X& F, const Follow& follow, const Product& product,
+void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& product,
                             const std::vector<Mat9X>& extra) {
   const int nb = layout_.num_bones, nu = layout_.num_unknowns, nz = 3 * nb + static_cast<int>(extra.size());
-  std::vector<Mat9X> Z(nz, Mat9X::Zero(9, nu)), HZ(nz);
+  std::vector<Mat9X> Z(nz), HZ(nz);
   for (int b = 0; b < nb; ++b)
     for (int k = 0; k < 3; ++k) {
-      Mat9X& Zk = Z[3 * b + k];
-      const int ub = layout_.num_soft + b;
       Mat3 W = Mat3::Zero();  // [e_k]_x
       W((k + 2) % 3, (k + 1) % 3) = 1.0;
       W((k + 1) % 3, (k + 2) % 3) = -1.0;
-      Zk.col(ub) = flatten(Mat3(W * unflatten(F.col(ub))));
-      follow(Zk);
+      turn(b, Mat3(W * unflatten(F.col(layout_.num_soft + b))), Z[3 * b + k], HZ[3 * b + k]);
     }
-  for (size_t e = 0; e < extra.size(); ++e) Z[3 * nb + e] = extra[e];
-  Eigen::MatrixXd E(nz, nz);
-  for (int j = 0; j < nz; ++j) {
-    product(Z[j], HZ[j]);
-    for (int i = 0; i < nz; ++i) E(i, j) = dot(Z[i], HZ[j]);
+  for (size_t e = 0; e < extra.size(); ++e) {
+    Z[3 * nb + e] = extra[e];
+    product(Z[3 * nb + e], HZ[3 * nb + e]);
   }
+  Eigen::MatrixXd E(nz, nz);
+  for (int j = 0; j < nz; ++j)
+    for (int i = 0; i < nz; ++i) E(i, j) = dot(Z[i], HZ[j]);
   const Eigen::Index entries = 9 * static_cast<Eigen::Index>(nu);
   Z_.resize(entries, nz);
   HZ_.resize(entries, nz);

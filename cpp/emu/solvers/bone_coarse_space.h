@@ -10,8 +10,9 @@
 // preconditioner
 //   M^-1 r = Q r + (I - Q H) B (I - H Q) r,   Q = Z (Z^T H Z)^-1 Z^T,
 // with B the base (Woodbury, tangent-projected) inverse, rebuilt every Newton
-// step with the Hessian CG uses (3 fits and 3 Hessian products per bone; H Z is
-// kept, so an application costs one B and 4 x 3 vector operations per bone).
+// step with the Hessian CG uses (3 Hessian products per bone, their fits
+// from the unit turn's, no back-substitution; H Z is kept, so an application
+// costs one B and 4 x 3 vector operations per bone).
 // Where Z^T H Z is not positive definite (negative curvature far from
 // equilibrium, or a neutral mode) the additive form Q + B with the positive
 // part of Z^T H Z is used. A direction of zero curvature, measured against the
@@ -32,15 +33,17 @@ namespace emu {
 class BoneCoarseSpace {
  public:
   using Product = std::function<void(const Mat9X&, Mat9X&)>;
-  /// Fills the soft columns of Z from its bone columns (the fit of the turn).
-  using Follow = std::function<void(Mat9X&)>;
+  /// turn(b, M, Z, HZ): Z (9 x #unknowns) = bone b turned by the tangent M
+  /// with the soft F_t of the turn's fitted positions (other bones 0), and
+  /// HZ = H Z (EmuSolver::bone_turn_into: from the unit turn's fits).
+  using Turn = std::function<void(int, const Mat3&, Mat9X&, Mat9X&)>;
 
   BoneCoarseSpace(const UnknownLayout& layout, double alpha);
 
   /// Rebuild at F (9 x #unknowns; bone columns rotations) with H's product;
   /// `extra` directions (9 x #unknowns each, bone columns tangent at F: the
   /// recycled directions of earlier CG solves) join the 3 turns per bone.
-  void build(const Mat9X& F, const Follow& follow, const Product& product, const std::vector<Mat9X>& extra = {});
+  void build(const Mat9X& F, const Turn& turn, const Product& product, const std::vector<Mat9X>& extra = {});
   bool built() const { return built_; }
 
   /// out = M^-1 in around the base inverse base(in, out) (tangent-projected).

@@ -73,6 +73,21 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
     factor_seconds_ += seconds_since(t0);
   }
   tet_energy_.resize(model_.tets.rows());
+  if (layout_.num_bones && emu_.bone_coarse_space) {
+    turn_fits_.resize(layout_.num_bones);
+    Eigen::MatrixX3d dx;
+    Mat9X Fd;
+    for (int b = 0; b < layout_.num_bones; ++b) {
+      UnitTurnFits& f = turn_fits_[b];
+      Mat9X Z = Mat9X::Zero(9, layout_.num_unknowns);
+      Z.col(layout_.num_soft + b) = flatten(Mat3::Identity());
+      fit_linear_into(Z, dx, Fd);
+      f.follow.resize(9, layout_.num_soft);
+      for (int u = 0; u < layout_.num_soft; ++u) f.follow.col(u) = Fd.col(layout_.unknown_tets[u]);
+      Z.leftCols(layout_.num_soft) = f.follow;
+      fit_linear_into(Z, dx, f.fit);
+    }
+  }
   {  // the gradient's round-off at an exact equilibrium (see rest_gradient_per_alpha_)
     LoadCase rest;
     rest.activation = Eigen::VectorXd::Zero(model_.num_muscles);
@@ -99,6 +114,8 @@ std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
     // all unknowns, rebuilt every Newton step
     const double vectors = 3.0 * layout_.num_bones + emu_.recycled_directions;
     out.emplace_back("movable bones and their coarse space", 2.0 * vectors * 9.0 * layout_.num_unknowns * 8);
+    out.emplace_back("bones' unit-turn fits",
+                     9.0 * 8 * layout_.num_bones * double(layout_.num_soft + model_.tets.rows()));
   }
   if (!layout_.joints.empty()) out.emplace_back("joints", sizeof(JointPoint) * double(layout_.joints.size()));
   return out;
@@ -166,6 +183,11 @@ void EmuSolver::retract(const Mat9X& F, const Mat9X& d, double s, Mat9X& out) co
 void EmuSolver::riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                                    bool curvature, Mat9X& out) const {
   hessian_product_into(A, v, out);
+  riemannian_columns(F, g, v, curvature, out);
+}
+
+void EmuSolver::riemannian_columns(const Mat9X& F, const Mat9X& g, const Mat9X& v, bool curvature,
+                                   Mat9X& out) const {
   for (int u = layout_.num_soft; u < layout_.num_unknowns; ++u) {
     const Mat3 R = unflatten(F.col(u));
     Mat3 M = unflatten(out.col(u));
@@ -271,6 +293,10 @@ void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v,
   Eigen::MatrixX3d dx;
   Mat9X Fd;
   fit_linear_into(v, dx, Fd);
+  hessian_product_from_fit(A, v, Fd, out);
+}
+
+void EmuSolver::hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& Fd, Mat9X& out) const {
   const auto& wv = acap_->weight_volume();
   const Eigen::Index m = model_.tets.rows();
   if (layout_.num_bones == 0) {  // one unknown per tet: one fused pass
@@ -285,6 +311,38 @@ void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v,
   const long nu = layout_.num_unknowns;
 #pragma omp parallel for schedule(static)
   for (long u = 0; u < nu; ++u) out.col(u) = A[u].lazyProduct(v.col(u)) - out.col(u);
+}
+
+void EmuSolver::bone_turn_into(int b, const Mat3& M, Mat9X& Z, Mat9X& Fd) const {
+  // The fit is linear in the per-tet targets and each target acts on the
+  // shape-function gradients from the left (K = L (x) I3): targets M T_t fit
+  // to positions X M^T, whose F_t are M F_t(X). So the turn by M is M times the
+  // unit turn, and so is its fit.
+  const UnitTurnFits& f = turn_fits_[b];
+  const int ns = layout_.num_soft;
+  const Eigen::Index m = model_.tets.rows();
+  Z.setZero(9, layout_.num_unknowns);
+  Fd.resize(9, m);
+#pragma omp parallel for schedule(static)
+  for (int u = 0; u < ns; ++u) Z.col(u) = flatten(Mat3(M * unflatten(f.follow.col(u))));
+  Z.col(ns + b) = flatten(M);
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index t = 0; t < m; ++t) Fd.col(t) = flatten(Mat3(M * unflatten(f.fit.col(t))));
+}
+
+std::pair<Eigen::MatrixXd, Eigen::MatrixXd> EmuSolver::bone_turn(const LoadCase& load, const Eigen::MatrixXd& Frows,
+                                                                 int bone, const Eigen::Matrix3d& M,
+                                                                 bool exact) const {
+  if (bone < 0 || bone >= static_cast<int>(turn_fits_.size()))
+    throw std::invalid_argument("bone_turn: bone " + std::to_string(bone) + " is not a movable bone of a solver " +
+                                "with the bone coarse space (" + std::to_string(turn_fits_.size()) + " such bones)");
+  const Context c = make_context(load);
+  std::vector<Mat9> A, A_exact;
+  blocks_into(c, to_cols(Frows), &A, &A_exact);
+  Mat9X Z, Fd, HZ;
+  bone_turn_into(bone, M, Z, Fd);
+  hessian_product_from_fit(exact ? A_exact : A, Z, Fd, HZ);
+  return {Z.transpose(), HZ.transpose()};
 }
 
 Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
@@ -555,9 +613,14 @@ class EmuSolver::Newton {
       ScopedSeconds timer(time.preconditioner);
       coarse_.build(
           F_,
-          [&](Mat9X& Z) {
-            s_.fit_linear_into(Z, dx_, Fd_);
-            for (int u = 0; u < s_.layout_.num_soft; ++u) Z.col(u) = Fd_.col(s_.layout_.unknown_tets[u]);
+          [&](int b, const Mat3& M, Mat9X& Z, Mat9X& HZ) {
+            s_.bone_turn_into(b, M, Z, Fd_);  // Z and its fit without a back-substitution
+            if (s_.has_contact() && Hc_.nonZeros()) {
+              product(Z, HZ);  // contact's term needs the fitted positions
+              return;
+            }
+            s_.hessian_product_from_fit(H, Z, Fd_, HZ);
+            s_.riemannian_columns(F_, g_, Z, exact, HZ);
           },
           product, recycled_);
     }

@@ -70,6 +70,14 @@ class EmuSolver {
   /// M^-1 R through the constant Schur complement S0 (constant_schur.h); only for
   /// a solver built with preconditioner = ConstantSchur. Blocks A_u at F.
   Eigen::MatrixXd constant_schur_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R);
+  /// The bone coarse space's turn of movable bone `bone` by the tangent M
+  /// (3x3, W R for a turn W of the bone's rotation R) with the soft tissue
+  /// following (bone_coarse_space.h): Z (#unknowns by 9: M on the bone, the
+  /// soft F_t of the fitted positions, other bones 0) and the Euclidean H Z at
+  /// F (filtered blocks unless exact; no contact term), both from the bone's
+  /// unit-turn fits (no fit per turn), as the coarse space builds them.
+  std::pair<Eigen::MatrixXd, Eigen::MatrixXd> bone_turn(const LoadCase& load, const Eigen::MatrixXd& F, int bone,
+                                                        const Eigen::Matrix3d& M, bool exact = false) const;
   /// Blocks A_u, #unknowns by 81 (column-major 9x9 per row); filtered unless exact.
   Eigen::MatrixXd block_hessians(const LoadCase& load, const Eigen::MatrixXd& F, bool exact = false) const;
   Eigen::MatrixXd mode_matrix() const { return woodbury_->dense_B(); }
@@ -119,6 +127,11 @@ class EmuSolver {
   void gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx, Mat9X& g) const;
   void blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>* A, std::vector<Mat9>* A_exact) const;
   void hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) const;
+  /// The same with v's fit given: Fd (9 x #T) = F_t(x*(v)), overwritten.
+  void hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& Fd, Mat9X& out) const;
+  /// The turn of bone b by M with the soft tissue following (see bone_turn):
+  /// Z (9 x #unknowns) and the F_t of its fit Fd (9 x #T), from turn_fits_.
+  void bone_turn_into(int b, const Mat3& M, Mat9X& Z, Mat9X& Fd) const;
   void fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const;
   void fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const;
   // Bones: tangent projection of the bone columns of v at F; F + s d retracted to rotations.
@@ -127,6 +140,8 @@ class EmuSolver {
   // Riemannian Hessian product: bone columns P_T(Hv - v sym(R^T g)).
   void riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                           bool curvature, Mat9X& out) const;
+  // Its bone columns from the Euclidean product Hv in out.
+  void riemannian_columns(const Mat9X& F, const Mat9X& g, const Mat9X& v, bool curvature, Mat9X& out) const;
   Mat9X to_cols(const Eigen::MatrixXd& rows) const;
   // Contact (SolverOptions::contact) on the fitted positions x = x*(F):
   //   E_c(x*(F)),  dE_c/dF = C^T K_c^-1 S^T g_x  (one back-substitution),
@@ -159,6 +174,16 @@ class EmuSolver {
   // three times farther from FEM: tests/test_error_estimate.py).
   double rest_gradient_per_alpha_ = 0;
   mutable std::vector<double> tet_energy_;
+  // Movable bones with the coarse space: the fit is linear and acts per
+  // coordinate (K = L (x) I3), so the fit of a bone turned by M with the soft
+  // F_t following is M times that of the unit turn M = I: per bone, F_t of the
+  // unit turn's fit on the soft unknowns (follow, 9 x #soft) and F_t of the fit
+  // of that followed field (fit, 9 x #T), two fits once at setup in place of
+  // six per Newton step (bone_turn_into).
+  struct UnitTurnFits {
+    Mat9X follow, fit;
+  };
+  std::vector<UnitTurnFits> turn_fits_;
 };
 
 }  // namespace emu
