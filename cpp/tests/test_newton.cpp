@@ -206,58 +206,45 @@ TEST(newton_driver_stalls_when_no_step_helps) {
   CHECK(r.iterations == 0);
 }
 
-TEST(newton_driver_stops_at_the_gradients_measured_round_off) {
-  // A gradient with a rounding-like error of 1e-6 (a fresh sample for every
-  // rounding of x), far above rtol_grad |g_0|: without the noise floor no
-  // iterate meets the test; with it the solve stops near the minimiser and
-  // says why.
-  ConvexProblem exact = make_problem(6);
-  SolveResult r_exact;
-  newton_minimize(exact, SolverOptions(), 1e-14, Clock::now(), r_exact);
-  CHECK(r_exact.converged && r_exact.status == "converged");
-  for (double factor : {0.0, 2.0}) {
-    ConvexProblem p = make_problem(6);
+// The minimiser of make_problem(6) and a solve of it whose gradient carries a
+// rounding-like error of 1e-6 (a fresh sample for every rounding of x), from
+// its start or from the minimiser, with the given noise_factor.
+struct NoisySolve {
+  ConvexProblem exact = make_problem(6), p = make_problem(6);
+  SolveResult r;
+  NoisySolve(double noise_factor, bool from_minimiser, double rtol_grad) {
+    SolveResult r_exact;
+    newton_minimize(exact, SolverOptions(), 1e-14, Clock::now(), r_exact);
+    CHECK(r_exact.converged && r_exact.status == "converged");
+    if (from_minimiser) p.x = exact.x;
     p.noise = 1e-6;
     SolverOptions o;
-    o.rtol_grad = 1e-12;
-    o.noise_factor = factor;
+    o.rtol_grad = rtol_grad;
+    o.noise_factor = noise_factor;
     o.max_iterations = 40;
-    SolveResult r;
     newton_minimize(p, o, 1e-14, Clock::now(), r);
-    if (factor == 0) {
-      CHECK(!r.converged);
-    } else {
-      CHECK(r.converged && r.status == "converged: the gradient is at its round-off level");
-      CHECK(r.iterations < 15);
-      CHECK((p.x - exact.x).norm() < 1e-5);
-      CHECK(r.grad_norm > 1e-12 * r.grad_norm0);  // not the plain test
-    }
   }
+};
+
+TEST(newton_driver_stops_at_the_gradients_measured_round_off) {
+  // The noise far above rtol_grad |g_0|: without the noise floor no iterate
+  // meets the test; with it the solve stops near the minimiser and says why.
+  CHECK(!NoisySolve(0.0, false, 1e-12).r.converged);
+  NoisySolve s(2.0, false, 1e-12);
+  CHECK(s.r.converged && s.r.status == "converged: the gradient is at its round-off level");
+  CHECK(s.r.iterations < 15);
+  CHECK((s.p.x - s.exact.x).norm() < 1e-5);
+  CHECK(s.r.grad_norm > 1e-12 * s.r.grad_norm0);  // not the plain test
 }
 
 TEST(newton_driver_measures_the_round_off_of_a_warm_start_that_stalls) {
-  // Started at the minimiser with the same noisy gradient: |g_0| is the noise
-  // itself, the endgame band (relative to |g_0|) is never entered, and no step
-  // lowers the energy. The stall is measured: converged at round-off, not "stalled".
-  ConvexProblem exact = make_problem(6);
-  SolveResult r_exact;
-  newton_minimize(exact, SolverOptions(), 1e-14, Clock::now(), r_exact);
-  for (double factor : {0.0, 2.0}) {
-    ConvexProblem p = make_problem(6);
-    p.x = exact.x;
-    p.noise = 1e-6;
-    SolverOptions o;
-    o.noise_factor = factor;
-    o.max_iterations = 40;
-    SolveResult r;
-    newton_minimize(p, o, 1e-14, Clock::now(), r);
-    if (factor == 0) {
-      CHECK(!r.converged);
-    } else {
-      CHECK(r.converged && r.status == "converged: the gradient is at its round-off level");
-      CHECK((p.x - exact.x).norm() < 1e-5);
-    }
-  }
+  // Started at the minimiser: |g_0| is the noise itself, the endgame band
+  // (relative to |g_0|) is never entered, and no step lowers the energy. The
+  // stall is measured: converged at round-off, not "stalled".
+  CHECK(!NoisySolve(0.0, true, SolverOptions().rtol_grad).r.converged);
+  NoisySolve s(2.0, true, SolverOptions().rtol_grad);
+  CHECK(s.r.converged && s.r.status == "converged: the gradient is at its round-off level");
+  CHECK((s.p.x - s.exact.x).norm() < 1e-5);
 }
 
 TEST(lbfgs_meets_the_secant_equation_and_skips_pairs_without_curvature) {

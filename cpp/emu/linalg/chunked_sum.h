@@ -26,6 +26,22 @@ double chunked_sum(Eigen::Index n, F&& f) {
   return s;
 }
 
+/// The vector form: out = sum of partial(lo, hi, part) over the same fixed
+/// chunks [lo, hi) of [0, n), each writing its chunk's m-vector into part,
+/// then summed in chunk order (parts: m x kSumChunks work array, resized).
+template <class Partial>
+void chunked_sum_into(Eigen::Index n, Eigen::Index m, Partial&& partial, Eigen::MatrixXd& parts,
+                      Eigen::VectorXd& out) {
+  parts.resize(m, kSumChunks);
+#pragma omp parallel for schedule(static)
+  for (int c = 0; c < kSumChunks; ++c) {
+    auto part = parts.col(c);
+    partial(n * c / kSumChunks, n * (c + 1) / kSumChunks, part);
+  }
+  out = parts.col(0);
+  for (int c = 1; c < kSumChunks; ++c) out += parts.col(c);
+}
+
 /// sum over all entries of a .* b (any two dense Eigen objects of one size).
 template <class A, class B>
 double chunked_dot(const A& a, const B& b) {

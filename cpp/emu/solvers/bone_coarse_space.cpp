@@ -34,7 +34,6 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
     Z_.col(j) = flat(Z[j]);
     HZ_.col(j) = flat(HZ[j]);
   }
-  parts_.resize(nz, kSumChunks);
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (E + E.transpose()));
   double scale = std::numeric_limits<double>::infinity();
   for (int u = layout_.num_soft; u < nu; ++u) {
@@ -64,15 +63,13 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
 }
 
 void BoneCoarseSpace::project(const Eigen::MatrixXd& M, const Mat9X& v, Eigen::VectorXd& c) const {
-  const Eigen::Index n = M.rows();
   const Flat x = flat(v);
-#pragma omp parallel for schedule(static)
-  for (int k = 0; k < kSumChunks; ++k) {
-    const Eigen::Index lo = n * k / kSumChunks, hi = n * (k + 1) / kSumChunks;
-    parts_.col(k).noalias() = M.middleRows(lo, hi - lo).transpose() * x.segment(lo, hi - lo);
-  }
-  c = parts_.col(0);
-  for (int k = 1; k < kSumChunks; ++k) c += parts_.col(k);
+  chunked_sum_into(
+      M.rows(), M.cols(),
+      [&](Eigen::Index lo, Eigen::Index hi, auto& part) {
+        part.noalias() = M.middleRows(lo, hi - lo).transpose() * x.segment(lo, hi - lo);
+      },
+      parts_, c);
 }
 
 void BoneCoarseSpace::combine(const Mat9X& a, double s, const Eigen::MatrixXd& M, const Eigen::VectorXd& c,

@@ -791,17 +791,20 @@ class EmuSolver::Newton {
   }
 
  private:
+  // The gradient at F with its fit (x, Fx), contact included (Euclidean).
+  void gradient_with_fit(const Mat9X& F, const Eigen::MatrixX3d& x, const Mat9X& Fx, Mat9X& g) const {
+    s_.gradient_into(c_, F, Fx, g);
+    s_.add_contact_gradient(x, g);
+  }
   void riemannian_gradient_at(const Mat9X& F, Mat9X& g) const {
     Eigen::MatrixX3d x;
     Mat9X Fx;
     s_.fit_into(c_, F, x, Fx);
-    s_.gradient_into(c_, F, Fx, g);
-    s_.add_contact_gradient(x, g);
+    gradient_with_fit(F, x, Fx, g);
     if (bones_) s_.project_tangent(F, g);
   }
   void update_gradient() {
-    s_.gradient_into(c_, F_, Fx_, g_);
-    s_.add_contact_gradient(x_, g_);
+    gradient_with_fit(F_, x_, Fx_, g_);
     gR_ = g_;
     if (bones_) s_.project_tangent(F_, gR_);
     gn_ = gR_.norm();
