@@ -1,5 +1,6 @@
 #include "emu/solvers/constant_schur.h"
 
+#include "emu/linalg/spd_inverse.h"
 #include "emu/solvers/schur_form.h"
 
 #include <algorithm>
@@ -51,12 +52,9 @@ bool ConstantSchur::update(const std::vector<Mat9>& A) {
   int bad = 0;
 #pragma omp parallel for schedule(static) reduction(+ : bad)
   for (long u = 0; u < n; ++u) {
-    const Eigen::LLT<Mat9> llt(A[u]);
-    if (llt.info() != Eigen::Success) {
+    if (!spd_inverse<9>(A[u], Ainv_[u])) {
       ++bad;
       Ainv_[u].setZero();
-    } else {
-      Ainv_[u] = llt.solve(Mat9::Identity());
     }
   }
   ok_ = bad == 0;

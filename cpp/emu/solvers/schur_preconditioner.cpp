@@ -1,5 +1,7 @@
 #include "emu/solvers/schur_preconditioner.h"
 
+#include "emu/linalg/spd_inverse.h"
+
 namespace emu {
 
 SchurPreconditioner::SchurPreconditioner(const Model& model, const UnknownLayout& layout, const AcapOperator& acap,
@@ -20,7 +22,8 @@ bool SchurPreconditioner::update(const std::vector<Mat9>& A) {
   const long m = static_cast<long>(A.size());
 #pragma omp parallel for schedule(static)
   for (long t = 0; t < m; ++t) {
-    Ainv_[t] = Eigen::LLT<Mat9>(A[t]).solve(Mat9::Identity());
+    if (!spd_inverse<9>(A[t], Ainv_[t]))  // filtered blocks are definite: only non-finite ones get here
+        Ainv_[t] = Eigen::LLT<Mat9>(A[t]).solve(Mat9::Identity());
     // w V (I - alpha w V A^-1), symmetrised against roundoff
     Mat9 M = -alpha_ * wv(t) * wv(t) * Ainv_[t];
     M.diagonal().array() += wv(t);

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "emu/linalg/spd_inverse.h"
+
 extern "C" void dsyrk_(const char* uplo, const char* trans, const int* n, const int* k, const double* alpha,
                        const double* a, const int* lda, const double* beta, double* c, const int* ldc);
 
@@ -40,7 +42,9 @@ bool Woodbury::update(const std::vector<Mat9>& A) {
   x_ok_ = false;
   if (ks_ == 0) {
 #pragma omp parallel for schedule(static)
-    for (long t = 0; t < m; ++t) Ainv_[t] = Eigen::LLT<Mat9>(A[t]).solve(Mat9::Identity());
+    for (long t = 0; t < m; ++t)
+      if (!spd_inverse<9>(A[t], Ainv_[t]))  // filtered blocks are definite: only non-finite ones get here
+        Ainv_[t] = Eigen::LLT<Mat9>(A[t]).solve(Mat9::Identity());
     return true;
   }
   const int k = 3 * ks_;
