@@ -296,7 +296,8 @@ void EmuSolver::hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v,
   hessian_product_from_fit(A, v, Fd, out);
 }
 
-void EmuSolver::hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& Fd, Mat9X& out) const {
+void EmuSolver::hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, const Mat9X& Fd,
+                                         Mat9X& out) const {
   const auto& wv = acap_->weight_volume();
   const Eigen::Index m = model_.tets.rows();
   if (layout_.num_bones == 0) {  // one unknown per tet: one fused pass
@@ -305,12 +306,24 @@ void EmuSolver::hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X
     for (Eigen::Index t = 0; t < m; ++t) out.col(t) = A[t].lazyProduct(v.col(t)) - (emu_.alpha * wv(t)) * Fd.col(t);
     return;
   }
+  // A soft unknown is one tet; a bone sums the fit's pull over its tets (in
+  // the layout's order, as reduce_to_unknowns): one pass, no per-tet copy.
+  const int ns = layout_.num_soft, nu = layout_.num_unknowns;
+  const double alpha = emu_.alpha;
+  out.resize(9, nu);
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t) Fd.col(t) *= emu_.alpha * wv(t);
-  reduce_to_unknowns(layout_, Fd, out);
-  const long nu = layout_.num_unknowns;
-#pragma omp parallel for schedule(static)
-  for (long u = 0; u < nu; ++u) out.col(u) = A[u].lazyProduct(v.col(u)) - out.col(u);
+  for (int u = 0; u < ns; ++u) {
+    const int t = layout_.unknown_tets[layout_.unknown_ptr[u]];
+    out.col(u) = A[u].lazyProduct(v.col(u)) - (alpha * wv(t)) * Fd.col(t);
+  }
+  for (int u = ns; u < nu; ++u) {
+    Vec9 pull = Vec9::Zero();
+    for (int i = layout_.unknown_ptr[u]; i < layout_.unknown_ptr[u + 1]; ++i) {
+      const int t = layout_.unknown_tets[i];
+      pull += (alpha * wv(t)) * Fd.col(t);
+    }
+    out.col(u) = A[u].lazyProduct(v.col(u)) - pull;
+  }
 }
 
 void EmuSolver::bone_turn_into(int b, const Mat3& M, Mat9X& Z, Mat9X& Fd) const {

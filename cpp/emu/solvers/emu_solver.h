@@ -127,8 +127,8 @@ class EmuSolver {
   void gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx, Mat9X& g) const;
   void blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>* A, std::vector<Mat9>* A_exact) const;
   void hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) const;
-  /// The same with v's fit given: Fd (9 x #T) = F_t(x*(v)), overwritten.
-  void hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& Fd, Mat9X& out) const;
+  /// The same with v's fit given: Fd (9 x #T) = F_t(x*(v)).
+  void hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, const Mat9X& Fd, Mat9X& out) const;
   /// The turn of bone b by M with the soft tissue following (see bone_turn):
   /// Z (9 x #unknowns) and the F_t of its fit Fd (9 x #T), from turn_fits_.
   void bone_turn_into(int b, const Mat3& M, Mat9X& Z, Mat9X& Fd) const;
