@@ -208,8 +208,9 @@ void corner_targets(const Eigen::VectorXd& wv, const UnknownLayout& layout, Targ
 }
 }  // namespace
 
-void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const {
-  corner_targets(wv_, layout_, [&](Eigen::Index t) { return Mat3(unflatten(D.col(t))); }, corner_.data());
+template <class TargetOf>
+void AcapOperator::apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const {
+  corner_targets(wv_, layout_, target, corner_.data());
   pattern_.gather(corner_.data(), 3, rhs_rows_.data());
   R.resize(dofs(), 3);
   R.topRows(ns_) = rhs_rows_;
@@ -218,6 +219,26 @@ void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const {
   for (size_t i = 0; i < bone_corner_.size(); ++i)  // fixed order: reproducible
     R.block<4, 3>(ns_ + 4 * bone_corner_bone_[i], 0).noalias() +=
         bone_corner_phi_.col(i) * Eigen::Map<const Vec3>(corner_.data() + 3 * bone_corner_[i]).transpose();
+}
+
+void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const {
+  apply_C_with([&](Eigen::Index t) { return Mat3(unflatten(D.col(t))); }, R);
+}
+
+void AcapOperator::apply_C_of_unknowns(const Mat9X& U, Eigen::MatrixX3d& R) const {
+  if (layout_.num_bones == 0) {  // one unknown per tet, in tet order
+    apply_C(U, R);
+    return;
+  }
+  apply_C_with([&](Eigen::Index t) { return Mat3(unflatten(U.col(layout_.tet_unknown(t)))); }, R);
+}
+
+void AcapOperator::fit_of_unknowns(const Mat9X& U, Eigen::MatrixX3d& x) const {
+  Eigen::MatrixX3d R;
+  apply_C_of_unknowns(U, R);
+  Eigen::MatrixXd Z;
+  solve_with(R, nullptr, Z);
+  expand(Eigen::MatrixX3d(Z), x);
 }
 
 void AcapOperator::fit(const Mat9X& F, const Mat9X* F_pinned, const Eigen::MatrixX3d* h, Eigen::MatrixX3d& x) const {

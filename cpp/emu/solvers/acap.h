@@ -78,6 +78,12 @@ class AcapOperator {
 
   /// R = C D = S^T sum_t w_t V_t D_t b_a (dofs() by 3) for per-tet matrices D (9 x #T).
   void apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const;
+  /// The same for per-unknown matrices U (9 x #unknowns): each tet's D_t is its
+  /// unknown's, read in place (no per-tet copy: per_tet_view).
+  void apply_C_of_unknowns(const Mat9X& U, Eigen::MatrixX3d& R) const;
+  /// The homogeneous fit (no pinned share, homogeneous joints) to per-unknown
+  /// targets U: writes the non-pinned rows of x (#V by 3).
+  void fit_of_unknowns(const Mat9X& U, Eigen::MatrixX3d& x) const;
 
   /// out_t = w_t V_t F_t(S u) (= C^T u) for position unknowns u (dofs() by 3).
   void apply_CT(const Eigen::MatrixX3d& u, Mat9X& out) const;
@@ -97,6 +103,9 @@ class AcapOperator {
  private:
   void solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h, Eigen::MatrixXd& Z) const;
   void setup_bones();
+  /// apply_C with D_t = target(t) (a Mat3).
+  template <class TargetOf>
+  void apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const;
 
   const Model& model_;
   const UnknownLayout& layout_;

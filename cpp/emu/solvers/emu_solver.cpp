@@ -164,9 +164,8 @@ void EmuSolver::fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, 
 }
 
 void EmuSolver::fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const {
-  Mat9X buf;
   dx.setZero(model_.rest.rows(), 3);
-  acap_->fit(per_tet_view(layout_, D, buf), nullptr, nullptr, dx);
+  acap_->fit_of_unknowns(D, dx);
   deformation_gradients(layout_, model_.tets, dx, Fd);
 }
 

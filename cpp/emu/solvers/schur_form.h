@@ -37,7 +37,7 @@ void apply_schur_form(const UnknownLayout& layout, const AcapOperator& acap, con
 #pragma omp parallel for schedule(static)
   for (long u = 0; u < n; ++u) out.col(u).noalias() = Ainv[u].lazyProduct(r.col(u));
   if (blocks_only) return;
-  acap.apply_C(per_tet_view(layout, out, w.per_tet), w.y);
+  acap.apply_C_of_unknowns(out, w.y);
   middle(w.y, w.u);
   acap.apply_CT(w.u, w.per_tet);
   const Mat9X* ct = &w.per_tet;
