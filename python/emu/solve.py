@@ -591,9 +591,12 @@ class Solver:
         its fast regime), make x2 the solution's positions with |x2 - x1| as
         its estimate (x2 is closer than that where they contract) and return
         (True, None). Else leave the solution as it was (the caller
-        re-solves at a larger alpha) and return (False, |x - x3|) where only
-        the last two corrections contracted (x1 overshot; x3 is then a closer
-        FEM point than x1 to choose the next alpha by), else (False, None)."""
+        re-solves at a larger alpha) and return (False, |x - x3|) where x1
+        overshot but the corrections then contract (|x2 - x1| shorter than
+        |x1 - x| though over CORRECTION_CONTRACTION of it, within ACCEPT x
+        target, and x3 contracting: x3 is then a closer FEM point than x1 to
+        choose the next alpha by; the third correction is the extra cost),
+        else (False, None)."""
         def corrected(x):
             """One FEM Newton correction of x on the estimator's factor, None if it fails."""
             try:
@@ -615,7 +618,7 @@ class Solver:
         # The next step must contract again (fusiform_20k: steps of 2.6e-4 and
         # 2.6e-4 while 2.3e-3 remained; docs/DESIGN.md).
         x3 = corrected(x2)
-        if x3 is None or (step3 := vertex_error(x2, x3)) > CORRECTION_CONTRACTION * step:
+        if x3 is None or vertex_error(x2, x3) > CORRECTION_CONTRACTION * step:
             return False, None
         if step > CORRECTION_CONTRACTION * own:   # x1 overshot: EMU's answer is not corrected
             return False, vertex_error(x, x3)

@@ -11,7 +11,7 @@
 //   M^-1 r = Q r + (I - Q H) B (I - H Q) r,   Q = Z (Z^T H Z)^-1 Z^T,
 // with B the base (Woodbury, tangent-projected) inverse, rebuilt every Newton
 // step with the Hessian CG uses (3 Hessian products per bone, their fits
-// from the unit turn's, no back-substitution; H Z is kept, so an application
+// from the unit turn's: no back-substitution without contact; H Z is kept, so an application
 // costs one B and 4 x 3 vector operations per bone).
 // Where Z^T H Z is not positive definite (negative curvature far from
 // equilibrium, or a neutral mode) the additive form Q + B with the positive

@@ -73,7 +73,8 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
     factor_seconds_ += seconds_since(t0);
   }
   tet_energy_.resize(model_.tets.rows());
-  if (layout_.num_bones && emu_.bone_coarse_space) {
+  if (layout_.num_bones && emu_.bone_coarse_space) {  // setup: counted with the factorisations
+    t0 = Clock::now();
     turn_fits_.resize(layout_.num_bones);
     Eigen::MatrixX3d dx;
     Mat9X Fd;
@@ -87,6 +88,7 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
       Z.leftCols(layout_.num_soft) = f.follow;
       fit_linear_into(Z, dx, f.fit);
     }
+    factor_seconds_ += seconds_since(t0);
   }
   {  // the gradient's round-off at an exact equilibrium (see rest_gradient_per_alpha_)
     LoadCase rest;
@@ -591,7 +593,8 @@ class EmuSolver::Newton {
         ++dir.factorizations;
         if (!s_.schur_->update(A_)) return dir.fail("Schur-complement preconditioner could not be factorised");
       } else if (s_.constant_schur_) {
-        if (!s_.constant_schur_->update(A_)) return dir.fail("a filtered Hessian block is not positive definite");
+        if (!s_.constant_schur_->update(A_))
+          return dir.fail("a filtered Hessian block is not positive definite (or not finite)");
       } else {
         s_.woodbury_->update(A_);
       }
