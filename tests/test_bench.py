@@ -165,3 +165,17 @@ def test_demo_phases_small():
     for r in rows.values():
         assert abs(sum(float(c) for c in r[5:11]) - float(r[3])) < 0.02
     assert "EMU total (solve + estimates) / FEM:" in out
+
+
+def test_accuracy_variants_small():
+    out = run(BENCH / "accuracy_variants.py", "--scenes", "fusiform_r3", "--variant", "cg_forcing_min=0",
+              "--variant", "", "--demo", "--demo-resolution", "2", "--demo-frames", "4")
+    blocks = out.split("\nvariant ")[1:]
+    assert len(blocks) == 2 and "cg_forcing_min" in blocks[0] and blocks[1].startswith("defaults")
+    for block in blocks:
+        rows = {line.split("|")[1].strip(): line.split("|") for line in block.splitlines() if line.startswith("| ")
+                and not line.startswith("| scene")}
+        assert set(rows) == {"fusiform_r3", "demo (4 frames)"}
+        assert float(rows["fusiform_r3"][-2]) < 0.01   # the true error within the accuracy
+        newton, cg = map(int, rows["demo (4 frames)"][2].split("/"))
+        assert newton > 0 and cg >= newton

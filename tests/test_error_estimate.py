@@ -76,3 +76,26 @@ def test_correction_hessian_choices():
     assert E["lower-energy"] < fs._core.energy(load, x)
     with pytest.raises(ValueError, match="hessian must be"):
         fs._core.newton_correction(load, x, "dense")
+
+
+def test_a_correction_where_pcg_meets_negative_curvature_skips_the_exact_factorisation():
+    """The estimate's FEM corrections run PCG on a lagged factor first. Where
+    that PCG meets p^T H p <= 0 the exact Newton matrix is indefinite, so its
+    factorisation (which would fail) is not tried: the step is the filtered
+    one, on the lagged factor where PCG reaches it, and equals a freshly
+    factorised filtered step to PCG's tolerance."""
+    s = fusiform(2, warn=False)
+    act = {"belly": 5e4}
+    solver = emu.Solver(s, "emu", alpha=100.0)
+    solver.solve(act)   # the estimate's correction leaves a factor to lag on
+    est = solver._estimator
+    load = solver.load_case(act)
+    x = emu.solve(s, act, "emu", alpha=3.0, error_estimate=False).positions
+    fresh = emu.Solver(s, "fem")._core
+    _, H = fresh.reduced_system(load, x, True)
+    assert np.linalg.eigvalsh(H)[0] < 0   # the exact matrix at x is indefinite
+    before = est.factorizations
+    y = est.newton_correction(load, x, max_steps=1)
+    assert est.factorizations - before <= 1   # not the failing exact attempt and then the filtered one
+    y_ref = fresh.newton_correction(load, x, "filtered", max_steps=1)
+    assert emu.vertex_error(y, y_ref) < 5e-2 * emu.vertex_error(x, y_ref)   # (PCG to 1e-3 |g|)

@@ -69,3 +69,42 @@ def test_cg_truncation_test_changes_the_path_not_the_answer(kind):
 def test_cg_model_decrease_outside_zero_one_is_refused(bad):
     with pytest.raises(ValueError, match="cg_model_decrease must lie in"):
         emu.Solver(emu.scenes.fusiform(2, warn=False), "emu", alpha=100, cg_model_decrease=bad)
+
+
+@pytest.mark.parametrize("kind", list(SMALL_KINDS))
+def test_accuracy_mode_floors_cg_forcing_where_its_step_test_applies(kind):
+    """In accuracy mode CG's forcing term is floored at sqrt(STEP_GRAD) = 0.1
+    (cg_forcing_min): the steps taken while |g| >= STEP_GRAD |g_0| (where
+    Eisenstat-Walker's term is at least 0.1) are the same CG solves as without
+    the floor, later ones stop no later than it, and both answers are within
+    the accuracy of FEM's."""
+    from emu.solve import ACCURACY_CG_FORCING_MIN, STEP_GRAD
+    assert ACCURACY_CG_FORCING_MIN == pytest.approx(STEP_GRAD ** 0.5)
+    make, act, normalized = SMALL_KINDS[kind]
+    scene = make()
+    fem = emu.solve(scene, act, "fem", normalized=normalized)
+    sols = {}
+    for floor in (0.0, None):
+        solver = emu.Solver(scene, "emu", accuracy=0.01, alpha=100, cg_forcing_min=floor)
+        assert solver.settings["cg_forcing_min"] == (0.0 if floor == 0.0 else ACCURACY_CG_FORCING_MIN)
+        sols[floor] = sol = solver.solve(act, normalized=normalized)
+        assert sol.converged and sol.accuracy_reached, (floor, sol.status)
+        assert emu.vertex_error(sol.positions, fem.positions) < 0.01
+    h0, h1 = sols[0.0].history, sols[None].history
+    g = h0["grad_norm"]
+    early = next((i for i in range(1, len(g)) if g[i - 1] < STEP_GRAD * g[0]), len(g))
+    assert early > 1   # steps before the floor can act
+    assert list(h0["cg_iterations"][:early]) == list(h1["cg_iterations"][:early])
+    if early < len(g) and len(h1["cg_iterations"]) > early:   # the first step the floor may shorten
+        assert h1["cg_iterations"][early] <= h0["cg_iterations"][early]
+    assert sols[None].cg_iterations <= sols[0.0].cg_iterations
+    if kind.startswith("arm"):   # its endgame goes below STEP_GRAD |g_0| in the first solve: the floor acts
+        assert sols[None].cg_iterations < sols[0.0].cg_iterations
+
+
+def test_strict_solves_have_no_cg_forcing_floor_and_bad_floors_are_refused():
+    scene = emu.scenes.fusiform(2, warn=False)
+    assert emu.Solver(scene, "emu", alpha=100, error_estimate=False).settings["cg_forcing_min"] == 0.0
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="cg_forcing_min must lie in"):
+            emu.Solver(scene, "emu", alpha=100, cg_forcing_min=bad)

@@ -181,6 +181,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("cg_max_iterations", &EmuOptions::cg_max_iterations)
       .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max)
       .def_readwrite("cg_forcing_exponent", &EmuOptions::cg_forcing_exponent)
+      .def_readwrite("cg_forcing_min", &EmuOptions::cg_forcing_min)
       .def_readwrite("cg_model_decrease", &EmuOptions::cg_model_decrease)
       .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh)
       .def_readwrite("preconditioner", &EmuOptions::preconditioner)
@@ -270,7 +271,9 @@ void bind_solvers(py::module_& m) {
           py::arg("load"), py::arg("x0"), py::arg("exact") = true,
           "(gradient, dense Hessian) of the reduced unknowns at x0 (small meshes only)")
       .def_property_readonly("setup_seconds", &FemSolver::setup_seconds)
-      .def_property_readonly("factor_nnz", &FemSolver::factor_nnz);
+      .def_property_readonly("factor_nnz", &FemSolver::factor_nnz)
+      .def_property_readonly("factorizations", &FemSolver::factorizations,
+                             "numeric factorisations of the Newton matrix so far (solves and corrections)");
 
   py::class_<EmuSolver>(m, "EmuSolver")
       .def(py::init([](const Model& m, const SolverOptions& o, const EmuOptions& e) {

@@ -54,6 +54,10 @@ CORRECTION_CONTRACTION = 0.3
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
 # ... and the step test applies once |g| <= STEP_GRAD |g_0| (measured: docs/DESIGN.md)
 STEP_GRAD = 1e-2
+# ... and CG is asked for no more than Eisenstat-Walker's forcing term where
+# the step test begins to apply, sqrt(STEP_GRAD) (an answer to an accuracy
+# needs no superlinear endgame; measured: docs/DESIGN.md, "Accuracy as the knob")
+ACCURACY_CG_FORCING_MIN = math.sqrt(STEP_GRAD)
 # EMU's strict solves (no accuracy) also stop when a full step moves no vertex
 # by more than POSITION_TOL x the bounding-box diagonal, once |g| <=
 # POSITION_TOL_GRAD |g_0|: with bones the gradient's round-off (the fit's
@@ -214,6 +218,11 @@ class Solver:
                   at most this fraction of its decrease so far, divided by the
                   iteration count (Nash-Sofer's truncation test; 0.5 by default,
                   0: the residual test alone; measured in docs/DESIGN.md)
+    cg_forcing_min  Newton-Krylov: a floor on CG's forcing term eta (CG stops at
+                  |r| <= eta |g|, eta = min(0.5, max(cg_forcing_min, sqrt(|g| / |g_0|)))
+                  by Eisenstat-Walker); None: sqrt(STEP_GRAD) = 0.1 with ``accuracy``
+                  (the forcing where its step test begins: an answer to an accuracy
+                  needs no superlinear endgame), else 0 (measured in docs/DESIGN.md)
     preconditioner_refresh  rebuild the preconditioner every n steps (Newton-Krylov: sooner if CG
                   slows); None: 3 for Newton-Krylov, 20 for L-BFGS (measured: docs/DESIGN.md)
     exact_when_definite  use the unfiltered Hessian when it is definite (see README)
@@ -270,6 +279,7 @@ class Solver:
                  step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
                  noise_factor: float = 2.0, position_tol: float = POSITION_TOL,
                  max_iterations: int | None = None, cg_max_iterations: int = 500, cg_model_decrease: float = 0.5,
+                 cg_forcing_min: float | None = None,
                  preconditioner: str = "constant-schur",
                  preconditioner_refresh: int | None = None, bone_coarse_space: bool = True,
                  exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
@@ -366,6 +376,11 @@ class Solver:
                 raise ValueError(f"cg_model_decrease must lie in [0, 1] (0: the residual test alone), "
                                  f"got {cg_model_decrease!r}")
             eo.cg_model_decrease = float(cg_model_decrease)
+            if cg_forcing_min is None:
+                cg_forcing_min = ACCURACY_CG_FORCING_MIN if self.accuracy is not None else 0.0
+            if not (isinstance(cg_forcing_min, (int, float)) and 0 <= cg_forcing_min < 1):
+                raise ValueError(f"cg_forcing_min must lie in [0, 1) (0: no floor), got {cg_forcing_min!r}")
+            eo.cg_forcing_min = float(cg_forcing_min)
             if preconditioner_refresh is None:
                 preconditioner_refresh = LBFGS_REFRESH if step == "lbfgs" else 3
             if int(preconditioner_refresh) < 1:
@@ -384,7 +399,8 @@ class Solver:
             self._core = _core.EmuSolver(self.model, opts, eo)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
                                  preconditioner=preconditioner if step == "newton-krylov" else None,
-                                 cg_model_decrease=eo.cg_model_decrease if step == "newton-krylov" else None)
+                                 cg_model_decrease=eo.cg_model_decrease if step == "newton-krylov" else None,
+                                 cg_forcing_min=eo.cg_forcing_min if step == "newton-krylov" else None)
         self.setup_time_s = self._core.setup_seconds
         self.error_estimate = (bool(error_estimate) or self.accuracy is not None) and method == "emu"
         if int(error_estimate_steps) < 1:

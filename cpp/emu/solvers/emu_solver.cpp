@@ -650,7 +650,8 @@ class EmuSolver::Newton {
     } else {
       // Inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker)
       // and until the quadratic model stops falling fast (Nash-Sofer).
-      const double eta = std::min(o.cg_forcing_max, std::pow(gn_ / g0_, o.cg_forcing_exponent));
+      const double eta =
+          std::min(o.cg_forcing_max, std::max(o.cg_forcing_min, std::pow(gn_ / g0_, o.cg_forcing_exponent)));
       const PcgResult cg = pcg_.solve(product, [&](const Mat9X& r, Mat9X& z) { precondition(r, z); },
                                       Mat9X(-gR_), eta * gn_, o.cg_max_iterations, d_, o.cg_model_decrease);
       dir.cg_iterations = cg.iterations;

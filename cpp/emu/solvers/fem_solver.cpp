@@ -391,13 +391,16 @@ class FemSolver::Newton {
     s_.assemble_hessian(x_, act_, exact);
     last_exact_ = exact;
     int cg = 0;  // with a lagged factor, PCG first (SolverOptions::lagged_cg_iterations)
-    if (s_.options_.lagged_cg_iterations > 0 && !s_.has_contact() &&
-        lagged_direction(true, kCorrectionResidual * gn_, cg) &&
-        slope() < 0)
-      return true;
-    if (newton_direction(true) && slope() < 0) return true;
+    lagged_indefinite_ = false;
+    const bool lagged = s_.options_.lagged_cg_iterations > 0 && !s_.has_contact();
+    if (lagged && lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
+    // where PCG met p^T H p <= 0 the matrix is not definite: its factorisation
+    // would fail, so none is tried
+    if (!lagged_indefinite_ && newton_direction(true) && slope() < 0) return true;
     last_exact_ = false;
     s_.assemble_hessian(x_, act_, false);
+    // the filtered matrix is definite: PCG on the lagged factor first here too
+    if (lagged_indefinite_ && lagged_direction(false, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
     return filtered_direction() && slope() < 0;
   }
   /// Whether the last correction_direction used the exact element Hessians.
@@ -475,6 +478,7 @@ class FemSolver::Newton {
   // negative curvature: the caller factorises instead.
   bool lagged_direction(bool exact_border, double tol, int& cg_iterations) {
     const FemSolver::LaggedFactor& lag = s_.lag_;
+    lagged_indefinite_ = false;
     if (!lag.valid) return false;
     const Eigen::Index ns = gs_.size();
     if (nd_) border(exact_border, Hsb_, Hbb_);
@@ -500,6 +504,7 @@ class FemSolver::Newton {
     if (nd_) b.tail(nd_) = -gb_;
     const PcgResult cg = pcg_.solve(product, precondition, b, tol, s_.options_.lagged_cg_iterations, d);
     cg_iterations = cg.iterations;
+    lagged_indefinite_ = cg.negative_curvature;
     if (!cg.converged) return false;
     ds_ = d.head(ns);
     if (nd_) db_ = d.tail(nd_);
@@ -573,6 +578,7 @@ class FemSolver::Newton {
   Pcg<Eigen::VectorXd> pcg_;
   double E_ = 0, E0_ = 0, gn_ = 0, g0_ = 0, last_step_ = 0;
   bool last_exact_ok_ = true, last_exact_ = false;
+  bool lagged_indefinite_ = false;  // the last lagged PCG met p^T H p <= 0
   std::vector<NeutralMode> neutral_, last_neutral_;  // of the current / last step
 };
 

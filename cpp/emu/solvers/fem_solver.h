@@ -45,8 +45,11 @@ class FemSolver {
   /// correction of an approximate equilibrium such as EMU's, whose distance to
   /// x0 estimates x0's distance to the FEM equilibrium. A step that had to use
   /// the filtered matrix (x0 is not yet in Newton's regime) is followed by
-  /// another, up to max_steps. One or two factorisations per step; throws
-  /// std::runtime_error if no Newton direction exists.
+  /// another, up to max_steps. At most two factorisations per step; with a
+  /// lagged factor (SolverOptions::lagged_cg_iterations) PCG on it first, and
+  /// where that PCG meets negative curvature the exact matrix is known to be
+  /// indefinite: no factorisation of it is tried. Throws std::runtime_error if
+  /// no Newton direction exists.
   Eigen::MatrixX3d newton_correction(const LoadCase& load, const Eigen::MatrixX3d& x0,
                                      CorrectionHessian hessian = CorrectionHessian::LowerEnergy,
                                      int max_steps = 1);
@@ -71,6 +74,8 @@ class FemSolver {
   std::vector<std::pair<std::string, double>> structures() const;
   const Model& model() const { return model_; }
   double factor_nnz() const { return factor_.factor_nnz(); }
+  /// Numeric factorisations of the Newton matrix so far (solves and corrections).
+  int factorizations() const { return factorizations_; }
 
  private:
   class Newton;  // one solve's state, as the Newton driver sees it (fem_solver.cpp)

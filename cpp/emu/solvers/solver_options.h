@@ -76,8 +76,9 @@ struct EmuOptions {
   int modes = 24;          // k: ACAP modes in the Woodbury term (rounded up to a multiple of 3)
   EmuStep step = EmuStep::NewtonKrylov;
   int cg_max_iterations = 500;   // per Newton-Krylov step
-  double cg_forcing_max = 0.5;       // Eisenstat-Walker eta_k = min(max, (|g_k| / |g_0|)^exponent)
+  double cg_forcing_max = 0.5;       // Eisenstat-Walker eta_k = min(max, max(min, (|g_k| / |g_0|)^exponent))
   double cg_forcing_exponent = 0.5;
+  double cg_forcing_min = 0.0;       // a floor where the answer is needed only to an accuracy (0: none)
   // CG also needs the quadratic model to have stopped falling fast:
   // k (q_{k-1} - q_k) <= c |q_k| (Nash-Sofer; newton/pcg.h). 0: residual test alone
   double cg_model_decrease = 0.5;

@@ -1,0 +1,78 @@
+"""EMU's accuracy mode (Solver(accuracy=...)) under Solver option variants:
+per scene, Newton / CG counts, solve and estimate seconds, the alpha chosen,
+the estimate and the true vertex error to the converged FEM answer; with
+--demo also the demo's 25 warm-started frames (summed counts, largest error).
+Options as in bench/variants.py (one --variant per run, comma-separated
+key=value pairs; an empty --variant '' is the defaults).
+
+    python bench/accuracy_variants.py --scenes fusiform_20k arm_r5 \\
+        --variant cg_forcing_min=0 --variant '' [--demo [--demo-resolution 3 --demo-frames 25]] [--threads 1]
+"""
+from __future__ import annotations
+
+import argparse
+import warnings
+
+import numpy as np
+
+import emu
+from bench_scenes import SCENES, start_run
+from emu.app.demo import demo_spec
+from variants import parse_variant
+
+
+def scene_row(name, scene, act, normalized, fem, accuracy, variant) -> str:
+    solver = emu.Solver(scene, "emu", accuracy=accuracy, **variant)
+    sol = solver.solve(act, normalized=normalized)
+    return (f"| {name} | {sol.iterations} / {sol.cg_iterations} | {sol.time_s:.2f} + {sol.error_estimate_time_s:.2f} | "
+            f"{solver.alpha:.0f} ({sol.settings['alpha_attempts']}) | {sol.error_estimate:.2e} | "
+            f"{emu.vertex_error(sol, fem):.2e} |")
+
+
+def demo_row(spec, references, accuracy, variant) -> str:
+    solver = emu.Solver(spec.scene, **dict(spec.solver, accuracy=accuracy, **variant))
+    previous, newton, cg, solve_s, estimate_s, errors = None, 0, 0, 0.0, 0.0, []
+    for k in range(spec.frames):
+        sol = previous = solver.solve(spec.activation(k), initial=previous)
+        newton, cg = newton + sol.iterations, cg + sol.cg_iterations
+        solve_s, estimate_s = solve_s + sol.time_s, estimate_s + sol.error_estimate_time_s
+        errors.append(emu.vertex_error(sol.positions, references[k]))
+    return f"| demo ({spec.frames} frames) | {newton} / {cg} | {solve_s:.2f} + {estimate_s:.2f} | | | {max(errors):.2e} |"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scenes", nargs="*", default=["fusiform_20k", "simple_joint_free", "big_muscle_free", "arm_r5",
+                                                    "neck_r2", "arm_r3", "realistic_biceps"])
+    ap.add_argument("--variant", action="append", default=[], help="Solver options, e.g. cg_forcing_min=0")
+    ap.add_argument("--accuracy", type=float, default=0.01)
+    ap.add_argument("--demo", action="store_true", help="also the demo's frames")
+    ap.add_argument("--demo-resolution", type=int, default=3)
+    ap.add_argument("--demo-frames", type=int, default=25)
+    ap.add_argument("--threads", type=int, default=1)
+    a = ap.parse_args(argv)
+    variants = [parse_variant(v) for v in a.variant] or [{}]
+    start_run(a.threads)
+    warnings.simplefilter("ignore")
+    refs = {}
+    for name in a.scenes:
+        scene, act, normalized = SCENES[name]()
+        refs[name] = (scene, act, normalized, emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized))
+    if a.demo:
+        spec = demo_spec(a.demo_resolution, a.demo_frames)
+        fem, previous, demo_refs = emu.Solver(spec.scene, "fem", rtol_grad=1e-9), None, []
+        for k in range(spec.frames):
+            previous = fem.solve(spec.activation(k), initial=previous)
+            demo_refs.append(np.asarray(previous.positions))
+    for variant in variants:
+        print(f"\nvariant {variant or 'defaults'} (accuracy {a.accuracy:g}, {a.threads} thread(s))\n")
+        print("| scene | Newton / CG | solve s + estimate s | alpha chosen (solves) | estimate | true error |")
+        print("|---|---|---|---|---|---|")
+        for name, (scene, act, normalized, fem) in refs.items():
+            print(scene_row(name, scene, act, normalized, fem, a.accuracy, variant), flush=True)
+        if a.demo:
+            print(demo_row(spec, demo_refs, a.accuracy, variant), flush=True)
+
+
+if __name__ == "__main__":
+    main()
