@@ -13,6 +13,7 @@
 #include "emu/energy/snh_eigensystem.h"
 #include "emu/energy/stable_neo_hookean.h"
 #include "emu/linalg/rotation.h"
+#include "emu/mesh/tet_geometry.h"
 
 using namespace emu;
 
@@ -200,6 +201,44 @@ TEST(material_hessians_match_the_single_versions) {
     CHECK((exact - material_hessian(m, F)).norm() == 0.0);
     const Mat9 Hfd = fd_hessian(F, [&](const Mat3& G) { return material_stress(m, G); });
     CHECK((exact - Hfd).norm() <= 1e-6 * (1.0 + exact.norm()));
+  }
+}
+
+TEST(position_hessian_matches_finite_differences_and_the_dense_product) {
+  // E(x) = W(F(x)), F = sum_a x_a b_a^T: its 12x12 Hessian in the corner
+  // positions against central differences of its gradient corner_vectors(b,
+  // P(F(x))), and against the dense product G^T H G with dF = G dx.
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (int k = 0; k < 10; ++k) {
+    ShapeGrads b;
+    for (int i = 0; i < 12; ++i) b.data()[i] = n(rng);
+    Vec12 x;
+    for (int i = 0; i < 12; ++i) x(i) = 0.3 * n(rng) + (i % 3 == i / 3 % 3 ? 1.0 : 0.0);
+    auto F_of = [&](const Vec12& y) {
+      Mat3 F = Mat3::Zero();
+      for (int a = 0; a < 4; ++a) F += y.segment<3>(3 * a) * b.row(a);
+      return F;
+    };
+    const Mat12 K = position_hessian(b, snh::hessian(F_of(x), mu, lam));
+    const double h = 1e-6;
+    Mat12 Kfd;
+    for (int j = 0; j < 12; ++j) {
+      Vec12 p = x, m = x;
+      p(j) += h, m(j) -= h;
+      Kfd.col(j) = (corner_vectors(b, snh::stress(F_of(p), mu, lam)) - corner_vectors(b, snh::stress(F_of(m), mu, lam))) /
+                   (2 * h);
+    }
+    CHECK((K - Kfd).norm() <= 1e-5 * K.norm());
+    Mat9 A = Mat9::Zero();
+    for (int i = 0; i < 81; ++i) A.data()[i] = n(rng);
+    const Mat9 H = A + A.transpose();
+    Eigen::Matrix<double, 9, 12> G = Eigen::Matrix<double, 9, 12>::Zero();
+    for (int a = 0; a < 4; ++a)
+      for (int kk = 0; kk < 3; ++kk)
+        for (int i = 0; i < 3; ++i) G(i + 3 * kk, 3 * a + i) = b(a, kk);
+    const Mat12 Kh = position_hessian(b, H);
+    CHECK((Kh - G.transpose() * H * G).norm() <= 1e-13 * (G.transpose() * H * G).norm());
+    CHECK((Kh - Kh.transpose()).norm() <= 1e-13 * Kh.norm());
   }
 }
 
