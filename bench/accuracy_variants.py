@@ -22,7 +22,7 @@ from variants import parse_variant
 
 
 def scene_row(name, scene, act, normalized, fem, accuracy, variant) -> str:
-    solver = emu.Solver(scene, "emu", accuracy=accuracy, **variant)
+    solver = emu.Solver(scene, "emu", **{"accuracy": accuracy, **variant})
     sol = solver.solve(act, normalized=normalized)
     return (f"| {name} | {sol.iterations} / {sol.cg_iterations} | {sol.time_s:.2f} + {sol.error_estimate_time_s:.2f} | "
             f"{solver.alpha:.0f} ({sol.settings['alpha_attempts']}) | {sol.error_estimate:.2e} | "
@@ -30,7 +30,7 @@ def scene_row(name, scene, act, normalized, fem, accuracy, variant) -> str:
 
 
 def demo_row(spec, references, accuracy, variant) -> str:
-    solver = emu.Solver(spec.scene, **dict(spec.solver, accuracy=accuracy, **variant))
+    solver = emu.Solver(spec.scene, **{**spec.solver, "accuracy": accuracy, **variant})
     previous, newton, cg, solve_s, estimate_s, errors = None, 0, 0, 0.0, 0.0, []
     for k in range(spec.frames):
         sol = previous = solver.solve(spec.activation(k), initial=previous)

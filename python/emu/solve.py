@@ -222,7 +222,8 @@ class Solver:
                   |r| <= eta |g|, eta = min(0.5, max(cg_forcing_min, sqrt(|g| / |g_0|)))
                   by Eisenstat-Walker); None: sqrt(STEP_GRAD) = 0.1 with ``accuracy``
                   (the forcing where its step test begins: an answer to an accuracy
-                  needs no superlinear endgame), else 0 (measured in docs/DESIGN.md)
+                  needs no superlinear endgame), else 0; at most the cap 0.5 acts
+                  (measured in docs/DESIGN.md)
     preconditioner_refresh  rebuild the preconditioner every n steps (Newton-Krylov: sooner if CG
                   slows); None: 3 for Newton-Krylov, 20 for L-BFGS (measured: docs/DESIGN.md)
     exact_when_definite  use the unfiltered Hessian when it is definite (see README)
@@ -364,6 +365,14 @@ class Solver:
             self.contact = ContactTerm(scene, scene.contact)
             opts.set_contact(self.contact)
             self.settings.update(contact_distance=self.contact.distance, contact_stiffness=self.contact.stiffness)
+        if cg_forcing_min is not None:
+            if method != "emu" or step != "newton-krylov":
+                raise ValueError("cg_forcing_min is an option of EMU's Newton-Krylov step (CG's forcing floor); "
+                                 f"leave it out for method={method!r}, step={step!r}")
+            if isinstance(cg_forcing_min, bool) or not (isinstance(cg_forcing_min, (int, float))
+                                                          and 0 <= cg_forcing_min < 1):
+                raise ValueError(f"cg_forcing_min must lie in [0, 1) (0: no floor; above 0.5 it acts as 0.5, "
+                                 f"the forcing term's cap), got {cg_forcing_min!r}")
         if method == "fem":
             self._core = _core.FemSolver(self.model, opts)
         else:
@@ -378,8 +387,6 @@ class Solver:
             eo.cg_model_decrease = float(cg_model_decrease)
             if cg_forcing_min is None:
                 cg_forcing_min = ACCURACY_CG_FORCING_MIN if self.accuracy is not None else 0.0
-            if not (isinstance(cg_forcing_min, (int, float)) and 0 <= cg_forcing_min < 1):
-                raise ValueError(f"cg_forcing_min must lie in [0, 1) (0: no floor), got {cg_forcing_min!r}")
             eo.cg_forcing_min = float(cg_forcing_min)
             if preconditioner_refresh is None:
                 preconditioner_refresh = LBFGS_REFRESH if step == "lbfgs" else 3

@@ -36,6 +36,8 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   if (!(emu_.alpha > 0) || !std::isfinite(emu_.alpha)) throw std::invalid_argument("alpha must be positive and finite");
   if (emu_.modes < 0) throw std::invalid_argument("the number of modes must be >= 0");
   if (emu_.lbfgs_memory < 1) throw std::invalid_argument("lbfgs_memory must be >= 1");
+  if (!(emu_.cg_forcing_min >= 0 && emu_.cg_forcing_min < 1))
+    throw std::invalid_argument("cg_forcing_min must lie in [0, 1)");
   if (layout_.num_bones && emu_.step == EmuStep::NewtonKrylov && emu_.preconditioner == EmuPreconditioner::Schur)
     throw std::invalid_argument("the Schur-complement preconditioner does not handle movable bones; "
                                 "use preconditioner='woodbury'");

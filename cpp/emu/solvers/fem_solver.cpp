@@ -475,7 +475,9 @@ class FemSolver::Newton {
   // the factorised matrix applied by block elimination:
   //   y_s = K_lag^-1 r_s,  z_b = S_lag^-1 (r_b - Hsb_lag^T y_s),  z_s = y_s - K_lag^-1 Hsb_lag z_b.
   // False (nothing changed) if it does not converge within the cap or meets
-  // negative curvature: the caller factorises instead.
+  // negative curvature (lagged_indefinite_: the matrix is not definite, and
+  // newton_correction then factorises only the filtered one): the caller
+  // factorises instead.
   bool lagged_direction(bool exact_border, double tol, int& cg_iterations) {
     const FemSolver::LaggedFactor& lag = s_.lag_;
     lagged_indefinite_ = false;

@@ -45,11 +45,14 @@ class FemSolver {
   /// correction of an approximate equilibrium such as EMU's, whose distance to
   /// x0 estimates x0's distance to the FEM equilibrium. A step that had to use
   /// the filtered matrix (x0 is not yet in Newton's regime) is followed by
-  /// another, up to max_steps. At most two factorisations per step; with a
-  /// lagged factor (SolverOptions::lagged_cg_iterations) PCG on it first, and
-  /// where that PCG meets negative curvature the exact matrix is known to be
-  /// indefinite: no factorisation of it is tried. Throws std::runtime_error if
-  /// no Newton direction exists.
+  /// another, up to max_steps. Per step a factorisation of the exact matrix
+  /// and, where it is not definite, of the filtered one (with movable bones
+  /// first with the bones' exact rotation term, then without; diagonal shifts
+  /// where even that fails); with a lagged factor
+  /// (SolverOptions::lagged_cg_iterations) PCG on it first, and where that PCG
+  /// meets negative curvature the exact matrix is known to be indefinite: no
+  /// factorisation of it is tried. Throws std::runtime_error if no Newton
+  /// direction exists.
   Eigen::MatrixX3d newton_correction(const LoadCase& load, const Eigen::MatrixX3d& x0,
                                      CorrectionHessian hessian = CorrectionHessian::LowerEnergy,
                                      int max_steps = 1);
