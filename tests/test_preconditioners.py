@@ -76,8 +76,9 @@ def test_accuracy_mode_floors_cg_forcing_where_its_step_test_applies(kind):
     """In accuracy mode CG's forcing term is floored at sqrt(STEP_GRAD) = 0.1
     (cg_forcing_min): the steps taken while |g| >= STEP_GRAD |g_0| (where
     Eisenstat-Walker's term is at least 0.1) are the same CG solves as without
-    the floor, later ones stop no later than it, and both answers are within
-    the accuracy of FEM's."""
+    the floor, the first step it can act on stops no later (from the same
+    state, a looser tolerance), and both answers are within the accuracy of
+    FEM's."""
     from emu.solve import ACCURACY_CG_FORCING_MIN, STEP_GRAD
     assert ACCURACY_CG_FORCING_MIN == pytest.approx(STEP_GRAD ** 0.5)
     make, act, normalized = SMALL_KINDS[kind]
