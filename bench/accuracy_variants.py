@@ -17,6 +17,7 @@ import numpy as np
 
 import emu
 from bench_scenes import SCENES, start_run
+from demo_phases import run_frames
 from emu.app.demo import demo_spec
 from variants import parse_variant
 
@@ -30,14 +31,10 @@ def scene_row(name, scene, act, normalized, fem, accuracy, variant) -> str:
 
 
 def demo_row(spec, references, accuracy, variant) -> str:
-    solver = emu.Solver(spec.scene, **{**spec.solver, "accuracy": accuracy, **variant})
-    previous, newton, cg, solve_s, estimate_s, errors = None, 0, 0, 0.0, 0.0, []
-    for k in range(spec.frames):
-        sol = previous = solver.solve(spec.activation(k), initial=previous)
-        newton, cg = newton + sol.iterations, cg + sol.cg_iterations
-        solve_s, estimate_s = solve_s + sol.time_s, estimate_s + sol.error_estimate_time_s
-        errors.append(emu.vertex_error(sol.positions, references[k]))
-    return f"| demo ({spec.frames} frames) | {newton} / {cg} | {solve_s:.2f} + {estimate_s:.2f} | | | {max(errors):.2e} |"
+    options = {**spec.solver, "accuracy": accuracy, **variant}
+    r = run_frames(spec, options.pop("method", "emu"), references, **options)
+    return (f"| demo ({spec.frames} frames) | {r['newton']} / {r['cg']} | {r['solve_s']:.2f} + {r['estimate_s']:.2f} "
+            f"| | | {r['max_error']:.2e} |")
 
 
 def main(argv=None):

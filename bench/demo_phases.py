@@ -17,14 +17,18 @@ from emu.app.demo import demo_spec
 PHASES = ("hessian", "preconditioner", "linear_solve", "line_search", "step", "other")  # Solution.phase_times
 
 
-def run_frames(spec, method: str, **options) -> dict:
-    """One method over the spec's frames: summed times, counts and phases."""
+def run_frames(spec, method: str, references=None, **options) -> dict:
+    """One method over the spec's frames, each warm-started from the last:
+    summed times, counts and phases; with references (one #V by 3 array of
+    positions per frame) also the largest vertex error to them (max_error)."""
     solver = emu.Solver(spec.scene, method, **options)
     totals = dict(solve_s=0.0, estimate_s=0.0, newton=0, cg=0, corrected=0, **{p: 0.0 for p in PHASES})
-    previous = None
+    previous, errors = None, []
     for k in range(spec.frames):
         sol = solver.solve(spec.activation(k), initial=previous)
         previous = sol
+        if references is not None:
+            errors.append(emu.vertex_error(sol.positions, references[k]))
         totals["solve_s"] += sol.time_s
         totals["estimate_s"] += sol.error_estimate_time_s
         totals["newton"] += sol.iterations
@@ -34,6 +38,8 @@ def run_frames(spec, method: str, **options) -> dict:
             totals[p] += sol.phase_times[p]
     # the error estimate's FEM factorisations (its corrections run PCG on the last one first)
     totals["estimate_factorizations"] = getattr(solver._estimator, "factorizations", None)
+    if errors:
+        totals["max_error"] = max(errors)
     return totals
 
 
