@@ -138,4 +138,46 @@ TEST(emu_and_fem_agree_as_alpha_grows) {
   CHECK(prev < 1e-2);
 }
 
+// The bar with its top layer of hexes a movable bone: the bone's tets are
+// rigid (all four vertices move with it), and the ACAP operator sums them in
+// closed form (acap.h). C and C^T must stay adjoint, and C^T u must be w V F_t
+// of the positions u places (deformation_gradients, the general per-tet path).
+TEST(acap_rigid_bone_tets_keep_c_and_ct_adjoint) {
+  Model m = bar(2, 4);
+  const Eigen::Index nt = m.tets.rows();
+  m.num_bones = 1;
+  m.bone = Eigen::VectorXi::Constant(nt, -1);
+  for (Eigen::Index t = 0; t < nt; ++t) {
+    bool top = true;
+    for (int a = 0; a < 4; ++a) top = top && m.rest(m.tets(t, a), 2) >= 3.0;
+    if (top) {
+      m.bone(t) = 0;
+      m.muscle(t) = -1;
+    }
+  }
+  m.bone_stiffness = Eigen::VectorXd::Zero(1);
+  const UnknownLayout layout(m);
+  const AcapOperator acap(m, layout);
+  CHECK(acap.has_bones() && (m.bone.array() == 0).count() == 24);
+  std::mt19937 rng(4);
+  std::normal_distribution<double> n(0, 1);
+  Mat9X D(9, nt);
+  Eigen::MatrixX3d u(acap.dofs(), 3);
+  for (Eigen::Index i = 0; i < D.size(); ++i) D.data()[i] = n(rng);
+  for (Eigen::Index i = 0; i < u.size(); ++i) u.data()[i] = n(rng);
+  Eigen::MatrixX3d R;
+  Mat9X CTu, F;
+  acap.apply_C(D, R);
+  acap.apply_CT(u, CTu);
+  const double lhs = (R.array() * u.array()).sum(), rhs = (D.array() * CTu.array()).sum();
+  CHECK_CLOSE(lhs, rhs, 1e-12 * (R.norm() * u.norm()));
+  Eigen::MatrixX3d x = Eigen::MatrixX3d::Zero(m.rest.rows(), 3);
+  acap.expand(u, x);
+  deformation_gradients(layout, m.tets, x, F);
+  double worst = 0;
+  for (Eigen::Index t = 0; t < nt; ++t)
+    worst = std::max(worst, (CTu.col(t) - acap.weight_volume()(t) * F.col(t)).norm());
+  CHECK(worst <= 1e-12 * CTu.norm());
+}
+
 TEST_MAIN()

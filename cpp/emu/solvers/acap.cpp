@@ -94,10 +94,20 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
 void AcapOperator::setup_bones() {
   const Eigen::Index m = model_.tets.rows();
   const auto& vb = layout_.vertex_bone;
+  is_rigid_.assign(m, 0);
+  for (Eigen::Index t = 0; t < m; ++t) {
+    const int b = vb(model_.tets(t, 0));
+    bool rigid = b >= 0;
+    for (int a = 1; a < 4; ++a) rigid = rigid && vb(model_.tets(t, a)) == b;
+    if (!rigid) continue;
+    is_rigid_[t] = 1;
+    rigid_tets_.push_back(static_cast<int>(t));
+    rigid_tet_bone_.push_back(b);
+  }
   for (Eigen::Index t = 0; t < m; ++t)
     for (int a = 0; a < 4; ++a) {
       const int v = model_.tets(t, a);
-      if (vb(v) < 0) continue;
+      if (vb(v) < 0 || is_rigid_[t]) continue;
       bone_corner_.push_back(static_cast<int>(t * 4 + a));
       bone_corner_bone_.push_back(vb(v));
     }
@@ -196,11 +206,14 @@ void AcapOperator::solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h
 }
 
 namespace {
+// Rigid tets (skip[t], empty without bones) are left out: apply_C_with adds their sums.
 template <class TargetOf>
-void corner_targets(const Eigen::VectorXd& wv, const UnknownLayout& layout, TargetOf&& target, double* corner) {
+void corner_targets(const Eigen::VectorXd& wv, const UnknownLayout& layout, TargetOf&& target,
+                    const std::vector<char>& skip, double* corner) {
   const Eigen::Index m = wv.size();
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
+    if (!skip.empty() && skip[t]) continue;
     const Mat3 T = target(t);
     const ShapeGrads& b = layout.geometry.grad[t];
     for (int a = 0; a < 4; ++a) Eigen::Map<Vec3>(corner + t * 12 + 3 * a) = wv(t) * T * b.row(a).transpose();
@@ -210,7 +223,7 @@ void corner_targets(const Eigen::VectorXd& wv, const UnknownLayout& layout, Targ
 
 template <class TargetOf>
 void AcapOperator::apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const {
-  corner_targets(wv_, layout_, target, corner_.data());
+  corner_targets(wv_, layout_, target, is_rigid_, corner_.data());
   pattern_.gather(corner_.data(), 3, rhs_rows_.data());
   R.resize(dofs(), 3);
   R.topRows(ns_) = rhs_rows_;
@@ -219,6 +232,10 @@ void AcapOperator::apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const {
   for (size_t i = 0; i < bone_corner_.size(); ++i)  // fixed order: reproducible
     R.block<4, 3>(ns_ + 4 * bone_corner_bone_[i], 0).noalias() +=
         bone_corner_phi_.col(i) * Eigen::Map<const Vec3>(corner_.data() + 3 * bone_corner_[i]).transpose();
+  for (size_t i = 0; i < rigid_tets_.size(); ++i) {  // w V [T^T; 0] each (acap.h)
+    const int t = rigid_tets_[i];
+    R.block<3, 3>(ns_ + 4 * rigid_tet_bone_[i], 0).noalias() += wv_(t) * target(t).transpose();
+  }
 }
 
 void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const {
@@ -285,8 +302,14 @@ void AcapOperator::apply_CT(const Eigen::MatrixX3d& u, Mat9X& out) const {
   out.resize(9, m);
   // F_t(x) scaled in the same pass (a CG iteration calls this once or twice)
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t)
+  for (Eigen::Index t = 0; t < m; ++t) {
+    if (!is_rigid_.empty() && is_rigid_[t]) {  // the linear part of its bone's map (acap.h)
+      const int b = layout_.vertex_bone(model_.tets(t, 0));
+      out.col(t) = flatten(Mat3(u.block<3, 3>(ns_ + 4 * b, 0).transpose())) * wv_(t);
+      continue;
+    }
     out.col(t) = flatten(deformation_gradient(layout_.geometry.grad[t], x, model_.tets, t)) * wv_(t);
+  }
 }
 
 void AcapOperator::reduce_vertex(const Eigen::MatrixX3d& f, Eigen::MatrixX3d& R) const {

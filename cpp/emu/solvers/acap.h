@@ -116,6 +116,13 @@ class AcapOperator {
   // Bones: corners whose vertex moves with a bone (t * 4 + a, in fixed order)
   // and the vertex's phi; the coupling and the bone problem.
   std::vector<int> bone_corner_, bone_corner_bone_;
+  // Rigid tets: all four vertices move with one bone b (a bone's own tets,
+  // or tissue held between its vertices). Such a tet's corners add
+  // sum_a phi_a (w V T b_a)^T = w V [T^T; 0] to b's rows of C T (sum_a b_a = 0,
+  // sum_a X_a b_a^T = I), and its F_t(S u) is the linear part of b's map,
+  // u_b's top three rows transposed: no per-corner work (a third of arm_r5's tets).
+  std::vector<int> rigid_tets_, rigid_tet_bone_;
+  std::vector<char> is_rigid_;  // #T with bones, else empty
   Eigen::Matrix<double, 4, Eigen::Dynamic> bone_corner_phi_;
   Eigen::MatrixXd W_;            // num_free x nq: L_ss^-1 L_sb
   Eigen::MatrixXd Sb_;           // nq x nq bone Schur complement
