@@ -99,3 +99,22 @@ def test_a_correction_where_pcg_meets_negative_curvature_skips_the_exact_factori
     assert est.factorizations - before <= 1   # not the failing exact attempt and then the filtered one
     y_ref = fresh.newton_correction(load, x, "filtered", max_steps=1)
     assert emu.vertex_error(y, y_ref) < 5e-2 * emu.vertex_error(x, y_ref)   # (PCG to 1e-3 |g|)
+
+
+def test_a_correction_at_an_equilibrium_factorises_nothing():
+    """Where FEM's own solve would stop at once (its gradient at round-off),
+    the correction is no step: the positions come back unchanged and nothing
+    is factorised. A sequence's first frame at rest then costs no
+    factorisation; a loaded muscle still gets its Newton step."""
+    s = fusiform(2, warn=False)
+    fs = emu.Solver(s, "fem")._core
+    rest = emu.Solver(s, "fem").load_case({"belly": 0.0})
+    y = np.asarray(fs.newton_correction(rest, s.points, max_steps=2))
+    assert np.array_equal(y, s.points) and fs.factorizations == 0
+    loaded = emu.Solver(s, "fem").load_case({"belly": 5e4})
+    y = np.asarray(fs.newton_correction(loaded, s.points, max_steps=1))
+    assert fs.factorizations >= 1 and emu.vertex_error(y, s.points) > 1e-3
+    # in accuracy mode: the first frame at rest has a zero estimate and leaves no factor
+    solver = emu.Solver(s, "emu", accuracy=0.01)
+    sol = solver.solve({"belly": 0.0})
+    assert sol.error_estimate == 0.0 and solver._estimator.factorizations == 0

@@ -609,8 +609,16 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
   if (max_steps < 1) throw std::invalid_argument("max_steps must be >= 1");
   const Eigen::VectorXd act = tet_activation(model_, load);
   Eigen::MatrixX3d x = x0;
+  const double floor = gradient_floor(act);
   for (int step = 0; step < max_steps; ++step) {
     Newton newton(*this, load, act, &x);
+    // Where FEM's own solve would stop at once (the gradient at round-off:
+    // Convergence::initial), the correction is zero: nothing is assembled or
+    // factorised (a sequence's first frame at rest).
+    if (newton.grad_norm() <= floor) {
+      x = newton.positions();
+      break;
+    }
     if (!newton.correction_direction(hessian != CorrectionHessian::Filtered))
       throw std::runtime_error("no Newton correction from these positions: the Newton matrix is not positive "
                                "definite");

@@ -51,8 +51,9 @@ class FemSolver {
   /// where even that fails); with a lagged factor
   /// (SolverOptions::lagged_cg_iterations) PCG on it first, and where that PCG
   /// meets negative curvature the exact matrix is known to be indefinite: no
-  /// factorisation of it is tried. Throws std::runtime_error if no Newton
-  /// direction exists.
+  /// factorisation of it is tried. Where the gradient is at its round-off
+  /// floor (FEM's solve would stop at once) no step is taken and nothing is
+  /// factorised. Throws std::runtime_error if no Newton direction exists.
   Eigen::MatrixX3d newton_correction(const LoadCase& load, const Eigen::MatrixX3d& x0,
                                      CorrectionHessian hessian = CorrectionHessian::LowerEnergy,
                                      int max_steps = 1);
