@@ -168,6 +168,22 @@ def test_step_fraction_sets_the_stopping_rule():
         emu.Solver(s, "emu", accuracy=0.01, step_fraction=1.5)
 
 
+def test_a_warm_start_near_the_answer_is_gated_on_the_cold_start_scale():
+    """The step test applies once |g| <= STEP_GRAD |g_ref|, g_ref the larger of
+    the start's gradient and the cold start's (rest) under the same load: a
+    warm start at the answer stops after a step or two instead of reducing
+    its already small gradient a hundredfold (the parent: 4 Newton / 26 CG
+    here), and stays as close as the step test promises."""
+    s = emu.scenes.arm(1)
+    act = {"flexor": 0.5}
+    a = emu.Solver(s, "emu", accuracy=0.01).solve(act, normalized=True)
+    solver = emu.Solver(s, "emu", accuracy=0.01)   # the same first alpha
+    b = solver.solve(act, normalized=True, initial=a)
+    assert b.settings["alpha"] == a.settings["alpha"]
+    assert b.iterations <= 2 and "step_tol" in b.status
+    assert emu.vertex_error(b, a) <= 0.1 * 0.01   # the step test's distance (step_fraction x accuracy)
+
+
 def test_fem_stops_early_within_the_target(scene_with_fem):
     scene, act, normalized, fem = scene_with_fem
     strict = emu.Solver(scene, "fem").solve(act, normalized=normalized)

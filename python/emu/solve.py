@@ -52,7 +52,9 @@ ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS, ACCURACY_CG_FORCING = 0.6, 0.4, 
 CORRECTION_CONTRACTION = 0.3
 # EMU without alpha or accuracy: accuracy = DEFAULT_ACCURACY, starting at DEFAULT_ALPHA.
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
-# ... and the step test applies once |g| <= STEP_GRAD |g_0| (measured: docs/DESIGN.md)
+# ... and the step test applies once |g| <= STEP_GRAD max(|g_0|, |g| at the cold
+# start under the same load) (measured: docs/DESIGN.md; the cold start's scale
+# for warm starts: "Accuracy as the knob")
 STEP_GRAD = 1e-2
 # ... and CG is asked for no more than Eisenstat-Walker's forcing term where
 # the step test begins to apply, sqrt(STEP_GRAD) (an answer to an accuracy
@@ -198,7 +200,8 @@ class Solver:
     rtol_energy   ... and the last energy decrease <= rtol_energy x total decrease
     position_tol  EMU Newton-Krylov without ``accuracy``: ... or when a full step moves no
                   vertex by more than position_tol x the bounding-box diagonal, once |g| <=
-                  1e-3 |g_0| (the positions converged to about 7 digits; 0 turns it off;
+                  1e-3 |g_0| (|g_0| or, warm-started, the cold start's |g| where larger;
+                  the positions converged to about 7 digits; 0 turns it off;
                   settings["position_tol"] is None where it does not apply)
     noise_factor  ... or when |g| <= noise_factor x the gradient's round-off, measured in
                   the endgame (|g| <= max(1e-3, 100 rtol_grad) |g_0|, and before a solve

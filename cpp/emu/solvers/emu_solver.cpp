@@ -95,14 +95,7 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   {  // the gradient's round-off at an exact equilibrium (see rest_gradient_per_alpha_)
     LoadCase rest;
     rest.activation = Eigen::VectorXd::Zero(model_.num_muscles);
-    const Context c = make_context(rest);
-    const Mat9X F = start_unknowns(nullptr);
-    Eigen::MatrixX3d x;
-    Mat9X Fx, g;
-    fit_into(c, F, x, Fx);
-    gradient_into(c, F, Fx, g);
-    if (layout_.num_bones) project_tangent(F, g);
-    rest_gradient_per_alpha_ = g.norm() / emu_.alpha;
+    rest_gradient_per_alpha_ = cold_gradient_norm(make_context(rest)) / emu_.alpha;
   }
 }
 
@@ -529,6 +522,16 @@ double EmuSolver::gradient_floor(const Context& c) const {
   return 1e-13 * (soft + std::sqrt(bone_sq));
 }
 
+double EmuSolver::cold_gradient_norm(const Context& c) const {
+  const Mat9X F = start_unknowns(nullptr);
+  Eigen::MatrixX3d x;
+  Mat9X Fx, g;
+  fit_into(c, F, x, Fx);
+  gradient_into(c, F, Fx, g);
+  if (layout_.num_bones) project_tangent(F, g);
+  return g.norm();
+}
+
 Mat9X EmuSolver::start_unknowns(const Eigen::MatrixXd* F0) const {
   const Eigen::Index m = model_.tets.rows();
   const int nu = layout_.num_unknowns;
@@ -856,7 +859,11 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   const Context c = make_context(load);
   Newton newton(*this, c, start_unknowns(F0));
   SolveResult res;
-  newton_minimize(newton, options_, gradient_floor(c), t0, res, 10.0 * rest_gradient_per_alpha_ * emu_.alpha);
+  // A warm start's step-test gate on the cold start's scale (newton_minimize);
+  // without contact (its terms need not be defined at rest under these pins).
+  const double cold_g0 = F0 && options_.step_tol > 0 && !has_contact() ? cold_gradient_norm(c) : 0.0;
+  newton_minimize(newton, options_, gradient_floor(c), t0, res, 10.0 * rest_gradient_per_alpha_ * emu_.alpha,
+                  cold_g0);
   newton.finish(res);
   res.time_s = seconds_since(t0);
   return res;

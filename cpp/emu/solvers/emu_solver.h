@@ -119,6 +119,10 @@ class EmuSolver {
   void base_precondition(const Mat9X& F, const Mat9X& in, Mat9X& out) const;
   /// The work of the load at positions x (0 without gravity).
   double load_work(const Context& c, const Eigen::MatrixX3d& x) const;
+  /// |g| (tangent-projected, without contact) at the cold start F = I under
+  /// c's load: the step test's scale for a warm-started solve
+  /// (newton_minimize), and at rest the gradient's round-off.
+  double cold_gradient_norm(const Context& c) const;
   /// The start unknowns (9 x #unknowns) from a #T by 9 F0 (nullptr: identity).
   Mat9X start_unknowns(const Eigen::MatrixXd* F0) const;
   // F: 9 x #unknowns; Fx, Fd: 9 x #T (F_t of the fit).

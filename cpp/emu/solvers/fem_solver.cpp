@@ -588,9 +588,13 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   validate_load(model_, load);
   const auto t0 = Clock::now();
   const Eigen::VectorXd act = tet_activation(model_, load);
+  // A warm start's step-test gate on the cold start's scale (newton_minimize);
+  // without contact (its terms need not be defined at rest under these pins).
+  double cold_g0 = 0.0;
+  if (initial && options_.step_tol > 0 && !has_contact()) cold_g0 = Newton(*this, load, act, nullptr).grad_norm();
   Newton newton(*this, load, act, initial);
   SolveResult res;
-  newton_minimize(newton, options_, gradient_floor(act), t0, res);
+  newton_minimize(newton, options_, gradient_floor(act), t0, res, 0.0, cold_g0);
   res.set_neutral_modes(newton.neutral_modes());
   res.positions = newton.positions();
   res.time_s = seconds_since(t0);

@@ -54,10 +54,16 @@ constexpr double kNoiseFrom = 1e-3, kNoiseBand = 100.0;
 /// Minimises the problem from its current iterate; fills every field of res
 /// but positions, F and the neutral modes (the problem's own output).
 /// floor: the round-off level of the gradient norm; start_floor: a start
-/// below it is converged (see Convergence).
+/// below it is converged (see Convergence); cold_g0: |g| at the problem's
+/// cold start (rest) when this solve is warm-started, else 0. The step test's
+/// gate |g| <= step_tol_grad g_ref uses g_ref = max(|g_0|, cold_g0): the gate
+/// asks "near equilibrium" on the scale of the load, as a cold solve does,
+/// not relative to a warm start's already small |g_0| (which would make a
+/// start close to the answer solve 1 / step_tol_grad times tighter than a
+/// cold one).
 template <class Problem>
 void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::time_point t0, SolveResult& res,
-                     double start_floor = 0.0) {
+                     double start_floor = 0.0, double cold_g0 = 0.0) {
   double E = p.energy();
   Convergence conv{o.rtol_grad, o.rtol_energy, E, p.grad_norm(), floor};
   conv.start_floor = start_floor;
@@ -133,7 +139,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     if (conv.test(E_prev, E, gn)) {
       res.converged = true;
       res.status = gn > tol ? "converged: the gradient is at its round-off level" : "converged";
-    } else if (o.step_tol > 0 && ls.step == 1.0 && gn <= o.step_tol_grad * conv.g0 &&
+    } else if (o.step_tol > 0 && ls.step == 1.0 && gn <= o.step_tol_grad * std::max(conv.g0, cold_g0) &&
                (p.positions() - x_prev).rowwise().norm().maxCoeff() <= o.step_tol) {
       // A full Newton step this short: the remaining distance is about as
       // short (Newton-Krylov converges at least linearly at rate <= 1/2).
