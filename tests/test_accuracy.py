@@ -184,6 +184,21 @@ def test_a_warm_start_near_the_answer_is_gated_on_the_cold_start_scale():
     assert emu.vertex_error(b, a) <= 0.1 * 0.01   # the step test's distance (step_fraction x accuracy)
 
 
+@pytest.mark.parametrize("method", ["emu", "fem"])
+def test_a_warm_started_sequence_with_a_bone_stays_within_the_accuracy(method):
+    """Frames warm-started from the last (the gate on the cold start's scale
+    may end a frame after one loose step): every frame's answer stays within
+    the accuracy of FEM's converged one, the forearm turning through them."""
+    s = emu.scenes.arm(1)
+    solver = emu.Solver(s, method, accuracy=0.01)
+    fem = emu.Solver(s, "fem", rtol_grad=1e-10)
+    prev = ref = None
+    for a in (0.2, 0.4, 0.55, 0.6, 0.45):
+        prev = solver.solve({"flexor": a}, normalized=True, initial=prev)
+        ref = fem.solve({"flexor": a}, normalized=True, initial=ref)
+        assert prev.converged and emu.vertex_error(prev, ref) <= 0.01
+
+
 def test_fem_stops_early_within_the_target(scene_with_fem):
     scene, act, normalized, fem = scene_with_fem
     strict = emu.Solver(scene, "fem").solve(act, normalized=normalized)

@@ -147,6 +147,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("armijo", &SolverOptions::armijo)
       .def_readwrite("step_tol", &SolverOptions::step_tol)
       .def_readwrite("step_tol_grad", &SolverOptions::step_tol_grad)
+      .def_readwrite("step_tol_cold_scale", &SolverOptions::step_tol_cold_scale)
       .def_readwrite("max_backtracks", &SolverOptions::max_backtracks)
       .def_readwrite("eigen_filter", &SolverOptions::eigen_filter)
       .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite)

@@ -138,27 +138,37 @@ TEST(emu_and_fem_agree_as_alpha_grows) {
   CHECK(prev < 1e-2);
 }
 
-// The bar with its top layer of hexes a movable bone: the bone's tets are
-// rigid (all four vertices move with it), and the ACAP operator sums them in
-// closed form (acap.h). C and C^T must stay adjoint, and C^T u must be w V F_t
-// of the positions u places (deformation_gradients, the general per-tet path).
-TEST(acap_rigid_bone_tets_keep_c_and_ct_adjoint) {
-  Model m = bar(2, 4);
+// The bar with two movable bones: the top layer of hexes (bone 0) but one
+// tet, which stays soft with all four vertices on bone 0 (rigid tissue), and
+// the layer below it (bone 1, sharing the vertices between the layers with
+// bone 0: joints, those vertices placed by bone 0). Rigid tets (all four
+// vertices placed by one bone) are summed in closed form (acap.h): C and C^T
+// must stay adjoint, and C^T u must be w V F_t of the positions u places
+// (deformation_gradients, the general per-tet path).
+TEST(acap_rigid_tets_keep_c_and_ct_adjoint) {
+  Model m = bar(2, 5);
   const Eigen::Index nt = m.tets.rows();
-  m.num_bones = 1;
+  m.num_bones = 2;
   m.bone = Eigen::VectorXi::Constant(nt, -1);
+  int soft_rigid = -1;
   for (Eigen::Index t = 0; t < nt; ++t) {
-    bool top = true;
-    for (int a = 0; a < 4; ++a) top = top && m.rest(m.tets(t, a), 2) >= 3.0;
-    if (top) {
-      m.bone(t) = 0;
+    double zmin = 1e9;
+    for (int a = 0; a < 4; ++a) zmin = std::min(zmin, m.rest(m.tets(t, a), 2));
+    const int b = zmin >= 4.0 ? 0 : zmin >= 3.0 ? 1 : -1;
+    if (b == 0 && soft_rigid < 0) {
+      soft_rigid = static_cast<int>(t);  // the first hex's first tet stays muscle
+      continue;
+    }
+    if (b >= 0) {
+      m.bone(t) = b;
       m.muscle(t) = -1;
     }
   }
-  m.bone_stiffness = Eigen::VectorXd::Zero(1);
+  m.bone_stiffness = Eigen::VectorXd::Zero(2);
   const UnknownLayout layout(m);
   const AcapOperator acap(m, layout);
-  CHECK(acap.has_bones() && (m.bone.array() == 0).count() == 24);
+  CHECK(acap.has_bones() && (m.bone.array() == 0).count() == 23 && (m.bone.array() == 1).count() == 24);
+  for (int a = 0; a < 4; ++a) CHECK(layout.vertex_bone(m.tets(soft_rigid, a)) == 0);  // rigid, yet soft
   std::mt19937 rng(4);
   std::normal_distribution<double> n(0, 1);
   Mat9X D(9, nt);

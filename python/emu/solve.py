@@ -54,7 +54,7 @@ CORRECTION_CONTRACTION = 0.3
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
 # ... and the step test applies once |g| <= STEP_GRAD max(|g_0|, |g| at the cold
 # start under the same load) (measured: docs/DESIGN.md; the cold start's scale
-# for warm starts: "Accuracy as the knob")
+# for warm starts: "The gate of a warm start"; checked by the error estimate)
 STEP_GRAD = 1e-2
 # ... and CG is asked for no more than Eisenstat-Walker's forcing term where
 # the step test begins to apply, sqrt(STEP_GRAD) (an answer to an accuracy
@@ -200,8 +200,7 @@ class Solver:
     rtol_energy   ... and the last energy decrease <= rtol_energy x total decrease
     position_tol  EMU Newton-Krylov without ``accuracy``: ... or when a full step moves no
                   vertex by more than position_tol x the bounding-box diagonal, once |g| <=
-                  1e-3 |g_0| (|g_0| or, warm-started, the cold start's |g| where larger;
-                  the positions converged to about 7 digits; 0 turns it off;
+                  1e-3 |g_0| (the positions converged to about 7 digits; 0 turns it off;
                   settings["position_tol"] is None where it does not apply)
     noise_factor  ... or when |g| <= noise_factor x the gradient's round-off, measured in
                   the endgame (|g| <= max(1e-3, 100 rtol_grad) |g_0|, and before a solve
@@ -337,6 +336,7 @@ class Solver:
         if self.accuracy is not None:
             opts.step_tol = float(step_fraction) * self.accuracy * bbox_diagonal(scene.points)
             opts.step_tol_grad = STEP_GRAD
+            opts.step_tol_cold_scale = True   # warm starts gate on the cold start's |g| too (STEP_GRAD)
             position_tol = None   # accuracy mode's own step test applies
         elif method == "emu" and step == "newton-krylov" and position_tol > 0:
             # (Newton-Krylov only: its steps contract by at least half, so a

@@ -120,7 +120,7 @@ class AcapOperator {
   // or tissue held between its vertices). Such a tet's corners add
   // sum_a phi_a (w V T b_a)^T = w V [T^T; 0] to b's rows of C T (sum_a b_a = 0,
   // sum_a X_a b_a^T = I), and its F_t(S u) is the linear part of b's map,
-  // u_b's top three rows transposed: no per-corner work (a third of arm_r5's tets).
+  // u_b's top three rows transposed: no per-corner work (a fifth of arm_r5's tets).
   std::vector<int> rigid_tets_, rigid_tet_bone_;
   std::vector<char> is_rigid_;  // #T with bones, else empty
   Eigen::Matrix<double, 4, Eigen::Dynamic> bone_corner_phi_;

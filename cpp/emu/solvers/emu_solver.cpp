@@ -861,7 +861,8 @@ SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   SolveResult res;
   // A warm start's step-test gate on the cold start's scale (newton_minimize);
   // without contact (its terms need not be defined at rest under these pins).
-  const double cold_g0 = F0 && options_.step_tol > 0 && !has_contact() ? cold_gradient_norm(c) : 0.0;
+  const double cold_g0 =
+      F0 && options_.step_tol > 0 && options_.step_tol_cold_scale && !has_contact() ? cold_gradient_norm(c) : 0.0;
   newton_minimize(newton, options_, gradient_floor(c), t0, res, 10.0 * rest_gradient_per_alpha_ * emu_.alpha,
                   cold_g0);
   newton.finish(res);

@@ -591,7 +591,8 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   // A warm start's step-test gate on the cold start's scale (newton_minimize);
   // without contact (its terms need not be defined at rest under these pins).
   double cold_g0 = 0.0;
-  if (initial && options_.step_tol > 0 && !has_contact()) cold_g0 = Newton(*this, load, act, nullptr).grad_norm();
+  if (initial && options_.step_tol > 0 && options_.step_tol_cold_scale && !has_contact())
+    cold_g0 = Newton(*this, load, act, nullptr).grad_norm();
   Newton newton(*this, load, act, initial);
   SolveResult res;
   newton_minimize(newton, options_, gradient_floor(act), t0, res, 0.0, cold_g0);

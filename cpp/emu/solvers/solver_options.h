@@ -26,11 +26,13 @@ struct SolverOptions {
   // (absolute, in position units; 0: off): the accuracy-matched stopping rule,
   // for answers needed to a given vertex error rather than to round-off.
   double step_tol = 0.0;
-  // ... and only once |g| <= step_tol_grad max(|g_0|, |g_cold|) (a short step
-  // far from equilibrium, along a stiff direction, says little about the
-  // distance left; |g_cold|: the cold start's gradient under the same load, for
-  // a warm-started solve: newton_minimize).
+  // ... and only once |g| <= step_tol_grad |g_0| (a short step far from
+  // equilibrium, along a stiff direction, says little about the distance left).
   double step_tol_grad = 1.0;
+  // With step_tol_cold_scale a warm-started solve gates on max(|g_0|, |g_cold|)
+  // instead, |g_cold| the cold start's gradient under the same load
+  // (newton_minimize): accuracy mode, whose error estimate checks each answer.
+  bool step_tol_cold_scale = false;
   double armijo = 1e-4;        // sufficient-decrease constant
   int max_backtracks = 40;     // step halvings before the line search gives up
   // Element Hessians: negative eigenvalues clamped (0) or reflected (1); see snh_eigensystem.h.

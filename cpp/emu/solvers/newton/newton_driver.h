@@ -55,12 +55,15 @@ constexpr double kNoiseFrom = 1e-3, kNoiseBand = 100.0;
 /// but positions, F and the neutral modes (the problem's own output).
 /// floor: the round-off level of the gradient norm; start_floor: a start
 /// below it is converged (see Convergence); cold_g0: |g| at the problem's
-/// cold start (rest) when this solve is warm-started, else 0. The step test's
-/// gate |g| <= step_tol_grad g_ref uses g_ref = max(|g_0|, cold_g0): the gate
-/// asks "near equilibrium" on the scale of the load, as a cold solve does,
-/// not relative to a warm start's already small |g_0| (which would make a
-/// start close to the answer solve 1 / step_tol_grad times tighter than a
-/// cold one).
+/// cold start (rest) when this solve is warm-started with
+/// SolverOptions::step_tol_cold_scale, else 0. The step test's gate |g| <=
+/// step_tol_grad g_ref uses g_ref = max(|g_0|, cold_g0): "near equilibrium"
+/// on the scale of the load, as for a cold solve, not relative to a warm
+/// start's already small |g_0| (which made a start close to the answer solve
+/// 1 / step_tol_grad times tighter than a cold one). Its first step may then
+/// be a loose one (Eisenstat-Walker's 0.5 against the warm |g_0|): accuracy
+/// mode's error estimate checks the answer (docs/DESIGN.md, "The gate of a
+/// warm start").
 template <class Problem>
 void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::time_point t0, SolveResult& res,
                      double start_floor = 0.0, double cold_g0 = 0.0) {
