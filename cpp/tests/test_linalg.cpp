@@ -1,6 +1,7 @@
 // CHOLMOD wrapper and shift-invert modes against dense Eigen.
 #include <cmath>
 #include <random>
+#include <stdexcept>
 
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
@@ -11,6 +12,7 @@
 #include "emu/linalg/modes.h"
 #include "emu/linalg/negative_curvature.h"
 #include "emu/linalg/spd_inverse.h"
+#include "emu/linalg/supernodal_solve.h"
 #include "emu/linalg/symmetric_product.h"
 
 using namespace emu;
@@ -95,6 +97,140 @@ TEST(cholmod_simplicial_factor_solves_and_refactorises_like_the_supernodal_one) 
   CHECK((simple - 0.5 * ref).norm() <= 1e-9 * ref.norm());
   for (double& v : x) v = -v;  // negative definite: reported, as for the supernodal factor
   CHECK(!g.factorize(x.data()));
+}
+
+// 3D grid Laplacian (n = g^3) plus a diagonal shift, with random positive
+// weights on its edges: SPD, with supernodes of many sizes (the root's off-
+// diagonal block empty, leaves of one column). Upper CSC.
+static void grid_laplacian_3d(int g, double shift, std::vector<int>& p, std::vector<int>& i, std::vector<double>& x,
+                       Eigen::MatrixXd& dense) {
+  const int n = g * g * g;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> weight(0.5, 2.0);
+  dense = Eigen::MatrixXd::Zero(n, n);
+  auto id = [g](int a, int b, int c) { return (a * g + b) * g + c; };
+  for (int a = 0; a < g; ++a)
+    for (int b = 0; b < g; ++b)
+      for (int c = 0; c < g; ++c) {
+        const int v = id(a, b, c);
+        dense(v, v) += shift;
+        const int next[3] = {a + 1 < g ? id(a + 1, b, c) : -1, b + 1 < g ? id(a, b + 1, c) : -1,
+                             c + 1 < g ? id(a, b, c + 1) : -1};
+        for (int w : next) {
+          if (w < 0) continue;
+          const double k = weight(rng);
+          dense(v, v) += k; dense(w, w) += k; dense(v, w) -= k; dense(w, v) -= k;
+        }
+      }
+  p.assign(1, 0);
+  i.clear();
+  x.clear();
+  for (int col = 0; col < n; ++col) {
+    for (int row = 0; row <= col; ++row)
+      if (dense(row, col) != 0.0) {
+        i.push_back(row);
+        x.push_back(dense(row, col));
+      }
+    p.push_back(static_cast<int>(i.size()));
+  }
+}
+
+TEST(supernodal_solve_of_few_right_hand_sides_matches_dense_and_cholmod) {
+  // CholmodFactor::solve takes supernodal_solve_in_place for 1-4 right-hand
+  // sides of a supernodal factor: it must give the dense solution for each
+  // count (b and x aliased too), and agree with CHOLMOD's own solve (the
+  // simplicial factor's, which supernodal_solve_in_place does not handle)
+  std::vector<int> p, i;
+  std::vector<double> x;
+  Eigen::MatrixXd K;
+  grid_laplacian_3d(11, 1e-3, p, i, x, K);
+  const int n = static_cast<int>(K.rows());
+  CholmodFactor f, simple;
+  f.analyze(n, p.data(), i.data());
+  CHECK(f.factorize(x.data()) && !f.simplicial());
+  simple.analyze_like(f);
+  CHECK(simple.factorize(x.data()));
+  simple.make_simplicial();
+  CHECK(simple.simplicial());
+  const Eigen::LLT<Eigen::MatrixXd> dense(K);
+  for (int nrhs = 1; nrhs <= 5; ++nrhs) {
+    const Eigen::MatrixXd b = Eigen::MatrixXd::Random(n, nrhs);
+    const Eigen::MatrixXd ref = dense.solve(b);
+    Eigen::MatrixXd sol(n, nrhs), by_cholmod(n, nrhs);
+    f.solve(b.data(), sol.data(), nrhs);
+    CHECK((sol - ref).norm() <= 1e-10 * ref.norm());
+    simple.solve(b.data(), by_cholmod.data(), nrhs);
+    CHECK((sol - by_cholmod).norm() <= 1e-12 * ref.norm());
+    Eigen::MatrixXd inplace = b;
+    f.solve(inplace.data(), inplace.data(), nrhs);
+    CHECK((inplace - sol).norm() == 0.0);
+  }
+  {  // the factor's single-precision copy, through CholmodFactor::solve
+    f.keep_single_precision_copy();
+    const Eigen::MatrixXd b = Eigen::MatrixXd::Random(n, 3);
+    const Eigen::MatrixXd ref = dense.solve(b);
+    Eigen::MatrixXd sol(n, 3), full(n, 3);
+    f.solve(b.data(), sol.data(), 3, true);
+    f.solve(b.data(), full.data(), 3);
+    CHECK((sol - ref).norm() <= 1e-3 * ref.norm() && (sol - full).norm() > 0.0);
+    CHECK((full - ref).norm() <= 1e-10 * ref.norm());
+  }
+  // the kernel alone, each build this CPU runs, on a zero-padded fourth lane:
+  // the padding stays zero and the lanes solve independently; with the
+  // factor rounded to float, the exact solution of the rounded factor (a
+  // dense solve with L~ L~^T) and within float round-off of the true one
+  const cholmod_factor* L = f.factor();
+  const SupernodalPanels<double> panels = supernodal_panels(*L);
+  std::vector<float> rounded(static_cast<const double*>(L->x), static_cast<const double*>(L->x) + L->xsize);
+  const SupernodalPanels<float> rounded_panels = with_values(panels, rounded.data());
+  Eigen::MatrixXd Lr = Eigen::MatrixXd::Zero(n, n);  // the rounded factor, dense, in L's (permuted) order
+  for (int s = 0; s < panels.nsuper; ++s) {
+    const int nsrow = panels.pi[s + 1] - panels.pi[s];
+    for (int j = 0; j < panels.super[s + 1] - panels.super[s]; ++j)
+      for (int k = j; k < nsrow; ++k)
+        Lr(panels.rows[panels.pi[s] + k], panels.super[s] + j) = rounded[panels.px[s] + j * nsrow + k];
+  }
+  const int* perm = static_cast<const int*>(L->Perm);
+  const Eigen::MatrixXd b = Eigen::MatrixXd::Random(n, 3);
+  Eigen::MatrixXd bp(n, 3);  // P b
+  for (int k = 0; k < n; ++k) bp.row(k) = b.row(perm[k]);
+  const Eigen::MatrixXd ref = dense.solve(b);
+  const Eigen::MatrixXd ref_rounded =
+      Lr.transpose().triangularView<Eigen::Upper>().solve(Lr.triangularView<Eigen::Lower>().solve(bp));
+  std::vector<SupernodalIsa> isas = {SupernodalIsa::baseline};
+  if (supernodal_solve_has_avx2()) isas.push_back(SupernodalIsa::avx2);
+  std::vector<double> scratch;
+  for (SupernodalIsa isa : isas) {
+    Eigen::MatrixXd rows = Eigen::MatrixXd::Zero(4, n);  // column k: row k of the lanes
+    rows.topRows(3) = bp.transpose();
+    supernodal_solve_in_place<4>(panels, rows.data(), scratch, isa);
+    CHECK(rows.row(3).norm() == 0.0);
+    for (int k = 0; k < n; ++k) CHECK((rows.col(k).head(3).transpose() - ref.row(perm[k])).norm() <= 1e-10 * ref.norm());
+    rows.setZero();
+    rows.topRows(3) = bp.transpose();
+    supernodal_solve_in_place<4>(rounded_panels, rows.data(), scratch, isa);
+    CHECK((rows.topRows(3).transpose() - ref_rounded).norm() <= 1e-10 * ref_rounded.norm());
+    double err = 0.0;
+    for (int k = 0; k < n; ++k) err += (rows.col(k).head(3).transpose() - ref.row(perm[k])).squaredNorm();
+    CHECK(std::sqrt(err) <= 1e-3 * ref.norm() && std::sqrt(err) > 1e-12 * ref.norm());  // rounded, not exact
+    for (int lanes : {1, 2}) {  // one and two right-hand sides: the first columns
+      Eigen::MatrixXd r = bp.leftCols(lanes).transpose();
+      if (lanes == 1) supernodal_solve_in_place<1>(panels, r.data(), scratch, isa);
+      else supernodal_solve_in_place<2>(panels, r.data(), scratch, isa);
+      for (int k = 0; k < n; ++k)
+        CHECK((r.col(k).transpose() - ref.row(perm[k]).head(lanes)).norm() <= 1e-10 * ref.norm());
+    }
+  }
+  // a negative-definite matrix is still reported, and the kernel refuses a simplicial factor
+  for (double& v : x) v = -v;
+  CHECK(!f.factorize(x.data()));
+  bool refused = false;
+  try {
+    supernodal_panels(*simple.factor());
+  } catch (const std::logic_error&) {
+    refused = true;
+  }
+  CHECK(refused);
 }
 
 TEST(symmetric_upper_product_matches_dense) {

@@ -138,6 +138,34 @@ TEST(emu_and_fem_agree_as_alpha_grows) {
   CHECK(prev < 1e-2);
 }
 
+// The constant Schur preconditioner's S0 solves with the factor rounded to
+// float (EmuOptions::single_precision_s0, the default on a scene without
+// movable bones): the preconditioner changes CG's path, not the answer, and
+// CG needs about as many iterations as with the double factor.
+TEST(emu_single_precision_s0_changes_cg_not_the_answer) {
+  const Model m = bar(3, 16);
+  const LoadCase l = load(3e4);
+  const double diag = (m.rest.colwise().maxCoeff() - m.rest.colwise().minCoeff()).norm();
+  SolveResult r[2];
+  for (int single : {0, 1}) {
+    EmuOptions eo;
+    eo.alpha = 100 * m.mu(0);
+    eo.single_precision_s0 = single == 1;
+    EmuSolver emu(m, SolverOptions{}, eo);
+    r[single] = emu.solve(l);
+    CHECK(r[single].converged);
+    // the rounded copy is listed with the preconditioner's bytes: 4 per factor entry more
+    double bytes = 0.0;
+    for (const auto& [name, b] : emu.structures())
+      if (name == "constant Schur preconditioner") bytes = b;
+    CHECK(bytes > 0.0);
+    if (single) CHECK(bytes >= 4.0 * emu.factor_nnz());
+  }
+  CHECK((r[1].positions - r[0].positions).rowwise().norm().maxCoeff() <= 1e-6 * diag);
+  CHECK(r[1].cg_iterations <= 1.15 * r[0].cg_iterations + 2 && r[0].cg_iterations <= 1.15 * r[1].cg_iterations + 2);
+  CHECK(r[0].cg_iterations > 0);
+}
+
 // The bar with two movable bones: the top layer of hexes (bone 0) but one
 // tet, which stays soft with all four vertices on bone 0 (rigid tissue), and
 // the layer below it (bone 1, sharing the vertices between the layers with

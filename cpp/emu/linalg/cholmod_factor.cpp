@@ -4,8 +4,17 @@
 #include <stdexcept>
 #include <string>
 
+#include "emu/linalg/supernodal_solve.h"
+
 namespace emu {
 namespace {
+template <typename Scalar>
+void solve_lanes(const SupernodalPanels<Scalar>& panels, int lanes, double* rows, std::vector<double>& scratch) {
+  if (lanes == 1) supernodal_solve_in_place<1>(panels, rows, scratch);
+  else if (lanes == 2) supernodal_solve_in_place<2>(panels, rows, scratch);
+  else supernodal_solve_in_place<4>(panels, rows, scratch);
+}
+
 thread_local std::string last_cholmod_error;
 void record_error(int status, const char* /*file*/, int /*line*/, const char* message) {
   if (status < 0) last_cholmod_error = message ? message : "unknown CHOLMOD error";
@@ -88,7 +97,20 @@ bool CholmodFactor::factorize(const double* values) {
   }
   check("factorize");
   factorized_ = true;
+  if (keep_rounded_) round_panels();
   return true;
+}
+
+void CholmodFactor::keep_single_precision_copy() {
+  keep_rounded_ = true;
+  if (factorized_) round_panels();
+}
+
+void CholmodFactor::round_panels() {
+  if (n_ == 0) return;
+  if (!L_->is_super) throw std::logic_error("CholmodFactor: a single-precision copy needs a supernodal factor");
+  const double* x = static_cast<const double*>(L_->x);
+  rounded_.assign(x, x + L_->xsize);
 }
 
 void CholmodFactor::make_simplicial() {
@@ -98,9 +120,22 @@ void CholmodFactor::make_simplicial() {
   check("change_factor");
 }
 
-void CholmodFactor::solve(const double* b, double* x, int nrhs) const {
+void CholmodFactor::solve(const double* b, double* x, int nrhs, bool single_precision) const {
   if (!factorized_) throw std::logic_error("CholmodFactor::solve before a successful factorize");
   if (n_ == 0) return;
+  if (single_precision) {
+    if (!keep_rounded_ || nrhs > 4)
+      throw std::logic_error("CholmodFactor::solve in single precision without keep_single_precision_copy");
+    solve_rows(b, x, nrhs, true);
+    return;
+  }
+  // 2-4 right-hand sides of a supernodal factor: supernodal_solve_in_place
+  // (CHOLMOD's dtrsm / dgemm calls per supernode pack each panel first; one
+  // right-hand side goes through dtrsv / dgemv, which do not, and is kept)
+  if (L_->is_super && nrhs >= 2 && nrhs <= 4) {
+    solve_rows(b, x, nrhs, false);
+    return;
+  }
   cholmod_dense B;
   std::memset(&B, 0, sizeof(B));
   B.nrow = n_;
@@ -113,6 +148,27 @@ void CholmodFactor::solve(const double* b, double* x, int nrhs) const {
   cholmod_solve2(CHOLMOD_A, L_, &B, nullptr, &X_, nullptr, &Y_, &E_, &common_);
   check("solve");
   std::memmove(x, X_->x, sizeof(double) * n_ * nrhs);
+}
+
+void CholmodFactor::solve_rows(const double* b, double* x, int nrhs, bool single_precision) const {
+  // P b into rows of `lanes` entries (the right-hand sides side by side, a
+  // zero lane where 3 are padded to 4), L L' solved in place, then P' back
+  const int lanes = nrhs == 1 ? 1 : nrhs == 2 ? 2 : 4;
+  const int* perm = static_cast<const int*>(L_->Perm);
+  rows_.resize(static_cast<std::size_t>(n_) * lanes);
+  for (int i = 0; i < n_; ++i) {
+    const int p = perm ? perm[i] : i;
+    double* row = rows_.data() + static_cast<std::size_t>(i) * lanes;
+    for (int r = 0; r < lanes; ++r) row[r] = r < nrhs ? b[p + static_cast<std::size_t>(r) * n_] : 0.0;
+  }
+  const SupernodalPanels<double> panels = supernodal_panels(*L_);
+  if (single_precision) solve_lanes(with_values(panels, rounded_.data()), lanes, rows_.data(), scratch_);
+  else solve_lanes(panels, lanes, rows_.data(), scratch_);
+  for (int i = 0; i < n_; ++i) {
+    const int p = perm ? perm[i] : i;
+    const double* row = rows_.data() + static_cast<std::size_t>(i) * lanes;
+    for (int r = 0; r < nrhs; ++r) x[p + static_cast<std::size_t>(r) * n_] = row[r];
+  }
 }
 
 double CholmodFactor::factor_nnz() const {

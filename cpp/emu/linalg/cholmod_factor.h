@@ -4,6 +4,7 @@
 // Symbolic analysis (fill-reducing ordering) happens once per pattern;
 // numeric factorisations and solves reuse it.
 #include <string>
+#include <vector>
 
 #include <cholmod.h>
 
@@ -35,25 +36,39 @@ class CholmodFactor {
   /// A later factorize refactorises it simplicially.
   void make_simplicial();
 
+  /// Keeps a copy of the factor rounded to single precision, made now and at
+  /// every later factorize (supernodal factors only): for solves that may be
+  /// inexact (a preconditioner's), half the bytes to stream.
+  void keep_single_precision_copy();
+
   /// x = A^-1 b for nrhs right-hand sides; b and x are n x nrhs column-major
-  /// (they may alias).
-  void solve(const double* b, double* x, int nrhs) const;
+  /// (they may alias). single_precision: with the rounded copy (1-4
+  /// right-hand sides), x = (L~ L~^T)^-1 b for the rounded factor L~.
+  void solve(const double* b, double* x, int nrhs, bool single_precision = false) const;
 
   int rows() const { return n_; }
   bool simplicial() const { return L_ && !L_->is_super; }
   bool factorized() const { return factorized_; }
   double factor_nnz() const;
+  /// The factor itself (null before analyze).
+  const cholmod_factor* factor() const { return L_; }
   /// Entries of A (upper triangle) as analysed.
   const cholmod_sparse* matrix() const { return A_; }
 
  private:
   void check(const char* what) const;
+  /// solve() for a supernodal factor and 1-4 right-hand sides: supernodal_solve_in_place
+  void solve_rows(const double* b, double* x, int nrhs, bool single_precision) const;
+  void round_panels();
   mutable cholmod_common common_;
   cholmod_sparse* A_ = nullptr;
   cholmod_factor* L_ = nullptr;
   mutable cholmod_dense* X_ = nullptr;
   mutable cholmod_dense* Y_ = nullptr;
   mutable cholmod_dense* E_ = nullptr;
+  std::vector<float> rounded_;  // keep_single_precision_copy: L's panels rounded
+  bool keep_rounded_ = false;
+  mutable std::vector<double> rows_, scratch_;  // solve_rows' work: n x lanes, and its supernode buffer
   int n_ = 0;
   bool factorized_ = false;
 };

@@ -84,11 +84,10 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
   corner_.resize(m * 12);
   rhs_rows_.resize(ns_, 3);
   if (nq_) setup_bones();
-  // Factorised once, solved two or three times per CG iteration: on small
-  // meshes CHOLMOD's simplicial solve beats the supernodal one (bench_cg
-  // back_substitution, 3 right-hand sides: 1,008 rows 95-103 against 69-83 us;
-  // 3,645 rows 481-488 against 463-535 us, even).
-  if (ns_ <= kSimplicialRows) factor_.make_simplicial();
+  // Factorised once, solved two or three times per CG iteration with 3
+  // right-hand sides: the factor stays supernodal, solved by
+  // supernodal_solve_in_place (CholmodFactor::solve), which beats CHOLMOD's
+  // simplicial solve on small meshes as well (docs/DESIGN.md).
 }
 
 void AcapOperator::setup_bones() {
@@ -183,6 +182,12 @@ Eigen::MatrixX3d AcapOperator::joint_targets(const Eigen::MatrixX3d& x, const Ei
     else h.row(r) = declared.rows() ? Eigen::RowVector3d(declared.row(j.declared)) : Eigen::RowVector3d(j.rest.transpose());
   }
   return h;
+}
+
+void AcapOperator::solve_rounded(const Eigen::MatrixXd& R, Eigen::MatrixXd& Z) const {
+  if (nq_) throw std::logic_error("AcapOperator::solve_rounded of an operator with movable bones");
+  Z.resize(ns_, R.cols());
+  factor_.solve(R.data(), Z.data(), static_cast<int>(R.cols()), true);
 }
 
 void AcapOperator::solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h, Eigen::MatrixXd& Z) const {

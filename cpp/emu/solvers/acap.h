@@ -48,8 +48,6 @@ void reduce_to_unknowns(const UnknownLayout& layout, Mat9X& per_tet, Mat9X& out)
 
 class AcapOperator {
  public:
-  /// Up to this many free vertices the factor is kept simplicial (faster solves).
-  static constexpr int kSimplicialRows = 4000;
 
   /// weight_volume  #T per-tet weights of the fit (nullptr: the ACAP weights
   ///                w_t V_t; ConstantSchur builds the same operator with others)
@@ -75,6 +73,11 @@ class AcapOperator {
 
   /// Z = K_c^-1 R with homogeneous joints: R, Z are dofs() by ncols (any ncols).
   void solve(const Eigen::MatrixXd& R, Eigen::MatrixXd& Z) const { solve_with(R, nullptr, Z); }
+  /// Z = K~^-1 R with the factor rounded to single precision (after
+  /// keep_single_precision_copy; operators without movable bones only): for
+  /// a preconditioner, half the bytes streamed (ConstantSchur).
+  void solve_rounded(const Eigen::MatrixXd& R, Eigen::MatrixXd& Z) const;
+  void keep_single_precision_copy() { factor_.keep_single_precision_copy(); }
 
   /// R = C D = S^T sum_t w_t V_t D_t b_a (dofs() by 3) for per-tet matrices D (9 x #T).
   void apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const;

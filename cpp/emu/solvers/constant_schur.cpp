@@ -1,5 +1,6 @@
 #include "emu/solvers/constant_schur.h"
 
+
 #include "emu/linalg/spd_inverse.h"
 #include "emu/solvers/schur_form.h"
 
@@ -24,9 +25,10 @@ Eigen::VectorXd ConstantSchur::weights(const Model& model, const UnknownLayout& 
   return e;
 }
 
-ConstantSchur::ConstantSchur(const Model& model, const UnknownLayout& layout, const AcapOperator& acap,
-                             double alpha)
-    : model_(model), layout_(layout), acap_(acap), alpha_(-1.0), Ainv_(layout.num_unknowns) {
+ConstantSchur::ConstantSchur(const Model& model, const UnknownLayout& layout, AcapOperator& acap, double alpha,
+                             bool single_precision)
+    : model_(model), layout_(layout), acap_(acap), single_precision_(single_precision), alpha_(-1.0),
+      Ainv_(layout.num_unknowns) {
   set_alpha(alpha);
 }
 
@@ -41,10 +43,15 @@ void ConstantSchur::set_alpha(double alpha) {
   if (ratio.maxCoeff() - ratio.minCoeff() <= 1e-12 * ratio.maxCoeff()) {
     scale_ = ratio.maxCoeff();
     s0_.reset();
-    return;
+  } else {
+    scale_ = 1.0;
+    s0_ = std::make_unique<AcapOperator>(model_, layout_, &e, &acap_);  // the ACAP matrix's pattern
   }
-  scale_ = 1.0;
-  s0_ = std::make_unique<AcapOperator>(model_, layout_, &e, &acap_);  // the ACAP matrix's pattern
+  // with movable bones S0's solve also eliminates the bone unknowns through
+  // quantities solved in double (AcapOperator::solve_with); rounding only the
+  // factor there would make the preconditioner slightly unsymmetric
+  rounded_ = single_precision_ && !s0().has_bones();
+  if (rounded_) (s0_ ? *s0_ : acap_).keep_single_precision_copy();
 }
 
 bool ConstantSchur::update(const std::vector<Mat9>& A) {
@@ -71,7 +78,8 @@ void ConstantSchur::apply(const Mat9X& r, Mat9X& out) const {
   apply_schur_form(layout_, acap_, Ainv_, alpha_ / scale_, r, out, work_,
                    [&](const Eigen::MatrixX3d& y, Eigen::MatrixX3d& u) {
                      rhs_ = y;
-                     (s0_ ? *s0_ : acap_).solve(rhs_, z_);
+                     if (rounded_) s0().solve_rounded(rhs_, z_);
+                     else s0().solve(rhs_, z_);
                      u = z_;
                    });
 }

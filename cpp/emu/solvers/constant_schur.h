@@ -38,7 +38,11 @@ namespace emu {
 
 class ConstantSchur {
  public:
-  ConstantSchur(const Model& model, const UnknownLayout& layout, const AcapOperator& acap, double alpha);
+  /// single_precision: S0's solves with its factor rounded to float where S0
+  /// has no movable bones (EmuOptions::single_precision_s0); acap keeps that
+  /// copy of its factor where S0 = c K.
+  ConstantSchur(const Model& model, const UnknownLayout& layout, AcapOperator& acap, double alpha,
+                bool single_precision = true);
 
   /// Invert the SPD blocks A_u (one per unknown). False if one is not SPD
   /// (apply() then returns r unchanged).
@@ -57,12 +61,18 @@ class ConstantSchur {
   /// Entries of S0's own factor (0 where S0 is a multiple of K and K's factor serves).
   double factor_nnz() const { return s0_ ? s0_->factor().factor_nnz() : 0.0; }
   /// Bytes held: S0's own factor (if any) and the block inverses.
-  double bytes() const { return 8.0 * factor_nnz() + sizeof(Mat9) * double(Ainv_.size()); }
+  double bytes() const {
+    return 8.0 * factor_nnz() + (rounded_ ? 4.0 * s0().factor().factor_nnz() : 0.0) + sizeof(Mat9) * double(Ainv_.size());
+  }
+  /// True where S0's solves use the single-precision factor.
+  bool single_precision() const { return rounded_; }
 
  private:
   const Model& model_;
   const UnknownLayout& layout_;
-  const AcapOperator& acap_;
+  const AcapOperator& s0() const { return s0_ ? *s0_ : acap_; }
+  AcapOperator& acap_;
+  bool single_precision_, rounded_ = false;
   double alpha_;
   std::unique_ptr<AcapOperator> s0_;  // empty where S0 = scale_ K (K's factor serves)
   double scale_ = 1.0;

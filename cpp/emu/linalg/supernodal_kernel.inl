@@ -1,0 +1,182 @@
+// The supernodal forward and back substitution kernels (supernodal_solve.h),
+// included by two translation units: supernodal_solve.cpp (the baseline ISA)
+// and supernodal_solve_avx2.cpp (-mavx2 -mfma, chosen at run time). Everything
+// here has internal linkage and calls nothing but built-ins, so no function
+// compiled for AVX2 can be picked by the linker for the baseline path.
+#include <cstddef>
+
+#include "emu/linalg/supernodal_solve.h"
+
+namespace emu {
+namespace {
+
+// One supernode s of L: columns k1 .. k1 + nscol - 1, stored column-major as
+// an nsrow by nscol panel (leading dimension nsrow) whose first nscol rows are
+// the lower-triangular diagonal block L11 and the other nrect = nsrow - nscol
+// rows the off-diagonal block L21, on the rows rows[nscol .. nsrow - 1].
+template <typename Scalar>
+struct Supernode {
+  const Scalar* panel;
+  const int* rows;
+  int nsrow, nscol;
+  std::size_t k1;
+};
+
+// The lanes of one row of W (entry k of every right-hand side): one GCC
+// vector (one AVX register for 4 lanes, two SSE2 ones without AVX), so that
+// each panel entry scales a whole row at once. aligned(8), may_alias: a row
+// is read and written in place in W's doubles.
+template <int Lanes>
+struct LaneOf;
+template <>
+struct LaneOf<1> {
+  using type = double;
+};
+template <>
+struct LaneOf<2> {
+  typedef double type __attribute__((vector_size(16), aligned(8), may_alias));
+};
+template <>
+struct LaneOf<4> {
+  typedef double type __attribute__((vector_size(32), aligned(8), may_alias));
+};
+template <int Lanes>
+using Lane = typename LaneOf<Lanes>::type;
+template <int Lanes>
+inline Lane<Lanes>& lane(double* W, std::size_t k) {
+  return *reinterpret_cast<Lane<Lanes>*>(W + k * Lanes);
+}
+
+// Forward: y = L11^-1 w_s, then w_rows -= L21 y. L21 y is summed four columns
+// at a time into a local buffer (acc), so each panel entry is read once and a
+// row of W is updated once per supernode.
+template <int Lanes, typename Scalar>
+void forward(const Supernode<Scalar>& s, double* W, double* acc) {
+  using Row = Lane<Lanes>;
+  double* Wd = W + s.k1 * Lanes;
+  // L11 y = w, four columns at a time: their 4x4 triangle, then the rows
+  // below it within the block (one load and store of a row per 4 columns)
+  int j = 0;
+  for (; j + 4 <= s.nscol; j += 4) {
+    for (int jj = j; jj < j + 4; ++jj) {
+      const Scalar* __restrict c = s.panel + static_cast<std::size_t>(jj) * s.nsrow;
+      const Row y = lane<Lanes>(Wd, jj) / double(c[jj]);
+      lane<Lanes>(Wd, jj) = y;
+      for (int i = jj + 1; i < j + 4; ++i) lane<Lanes>(Wd, i) -= double(c[i]) * y;
+    }
+    const Scalar* __restrict c0 = s.panel + static_cast<std::size_t>(j) * s.nsrow;
+    const Scalar* __restrict c1 = c0 + s.nsrow;
+    const Scalar* __restrict c2 = c1 + s.nsrow;
+    const Scalar* __restrict c3 = c2 + s.nsrow;
+    const Row y0 = lane<Lanes>(Wd, j), y1 = lane<Lanes>(Wd, j + 1), y2 = lane<Lanes>(Wd, j + 2),
+              y3 = lane<Lanes>(Wd, j + 3);
+    for (int i = j + 4; i < s.nscol; ++i)
+      lane<Lanes>(Wd, i) -= double(c0[i]) * y0 + double(c1[i]) * y1 + double(c2[i]) * y2 + double(c3[i]) * y3;
+  }
+  for (; j < s.nscol; ++j) {
+    const Scalar* __restrict c = s.panel + static_cast<std::size_t>(j) * s.nsrow;
+    const Row y = lane<Lanes>(Wd, j) / double(c[j]);
+    lane<Lanes>(Wd, j) = y;
+    for (int i = j + 1; i < s.nscol; ++i) lane<Lanes>(Wd, i) -= double(c[i]) * y;
+  }
+  const int nrect = s.nsrow - s.nscol;
+  if (nrect == 0) return;
+  for (std::size_t k = 0; k < static_cast<std::size_t>(nrect) * Lanes; ++k) acc[k] = 0.0;
+  for (j = 0; j + 4 <= s.nscol; j += 4) {
+    const Scalar* __restrict c0 = s.panel + static_cast<std::size_t>(j) * s.nsrow + s.nscol;
+    const Scalar* __restrict c1 = c0 + s.nsrow;
+    const Scalar* __restrict c2 = c1 + s.nsrow;
+    const Scalar* __restrict c3 = c2 + s.nsrow;
+    const Row y0 = lane<Lanes>(Wd, j), y1 = lane<Lanes>(Wd, j + 1), y2 = lane<Lanes>(Wd, j + 2),
+              y3 = lane<Lanes>(Wd, j + 3);
+    for (int i = 0; i < nrect; ++i) lane<Lanes>(acc, i) += double(c0[i]) * y0 + double(c1[i]) * y1 + double(c2[i]) * y2 + double(c3[i]) * y3;
+  }
+  for (; j < s.nscol; ++j) {
+    const Scalar* __restrict c = s.panel + static_cast<std::size_t>(j) * s.nsrow + s.nscol;
+    const Row y = lane<Lanes>(Wd, j);
+    for (int i = 0; i < nrect; ++i) lane<Lanes>(acc, i) += double(c[i]) * y;
+  }
+  for (int i = 0; i < nrect; ++i) lane<Lanes>(W, s.rows[s.nscol + i]) -= lane<Lanes>(acc, i);
+}
+
+// Backward: w_s -= L21^T x_rows (the rows gathered into xr once, four
+// columns' dot products per sweep over them), then x_s = L11^-T w_s.
+template <int Lanes, typename Scalar>
+void backward(const Supernode<Scalar>& s, double* W, double* xr) {
+  using Row = Lane<Lanes>;
+  double* Wd = W + s.k1 * Lanes;
+  const int nrect = s.nsrow - s.nscol;
+  for (int i = 0; i < nrect; ++i) lane<Lanes>(xr, i) = lane<Lanes>(W, s.rows[s.nscol + i]);
+  int j = 0;
+  for (; j + 4 <= s.nscol && nrect > 0; j += 4) {
+    const Scalar* __restrict c0 = s.panel + static_cast<std::size_t>(j) * s.nsrow + s.nscol;
+    const Scalar* __restrict c1 = c0 + s.nsrow;
+    const Scalar* __restrict c2 = c1 + s.nsrow;
+    const Scalar* __restrict c3 = c2 + s.nsrow;
+    Row s0 = Row{}, s1 = Row{}, s2 = Row{}, s3 = Row{};
+    for (int i = 0; i < nrect; ++i) {
+      const Row x = lane<Lanes>(xr, i);
+      s0 += double(c0[i]) * x;
+      s1 += double(c1[i]) * x;
+      s2 += double(c2[i]) * x;
+      s3 += double(c3[i]) * x;
+    }
+    lane<Lanes>(Wd, j) -= s0;
+    lane<Lanes>(Wd, j + 1) -= s1;
+    lane<Lanes>(Wd, j + 2) -= s2;
+    lane<Lanes>(Wd, j + 3) -= s3;
+  }
+  for (; j < s.nscol && nrect > 0; ++j) {
+    const Scalar* __restrict c = s.panel + static_cast<std::size_t>(j) * s.nsrow + s.nscol;
+    Row sj = Row{};
+    for (int i = 0; i < nrect; ++i) sj += double(c[i]) * lane<Lanes>(xr, i);
+    lane<Lanes>(Wd, j) -= sj;
+  }
+  // L11^T x = w, four columns at a time from the last: the single columns
+  // past the last multiple of four, then per block the dot products of its
+  // columns with the rows solved below it, then its 4x4 triangle
+  auto column = [&](int jj, int end) {
+    const Scalar* __restrict c = s.panel + static_cast<std::size_t>(jj) * s.nsrow;
+    Row x = lane<Lanes>(Wd, jj);
+    for (int i = jj + 1; i < end; ++i) x -= double(c[i]) * lane<Lanes>(Wd, i);
+    lane<Lanes>(Wd, jj) = x / double(c[jj]);
+  };
+  const int whole = s.nscol - s.nscol % 4;
+  for (int jj = s.nscol - 1; jj >= whole; --jj) column(jj, s.nscol);
+  for (int jb = whole - 4; jb >= 0; jb -= 4) {
+    const Scalar* __restrict c0 = s.panel + static_cast<std::size_t>(jb) * s.nsrow;
+    const Scalar* __restrict c1 = c0 + s.nsrow;
+    const Scalar* __restrict c2 = c1 + s.nsrow;
+    const Scalar* __restrict c3 = c2 + s.nsrow;
+    Row s0 = Row{}, s1 = Row{}, s2 = Row{}, s3 = Row{};
+    for (int i = jb + 4; i < s.nscol; ++i) {
+      const Row x = lane<Lanes>(Wd, i);
+      s0 += double(c0[i]) * x;
+      s1 += double(c1[i]) * x;
+      s2 += double(c2[i]) * x;
+      s3 += double(c3[i]) * x;
+    }
+    lane<Lanes>(Wd, jb) -= s0;
+    lane<Lanes>(Wd, jb + 1) -= s1;
+    lane<Lanes>(Wd, jb + 2) -= s2;
+    lane<Lanes>(Wd, jb + 3) -= s3;
+    for (int jj = jb + 3; jj >= jb; --jj) column(jj, jb + 4);
+  }
+}
+
+// L L^T Y = W in place over all supernodes (scratch: the longest
+// off-diagonal block times Lanes doubles).
+template <int Lanes, typename Scalar>
+void solve_panels(const SupernodalPanels<Scalar>& L, double* W, double* scratch) {
+  for (int s = 0; s < L.nsuper; ++s)
+    forward<Lanes>(Supernode<Scalar>{L.x + L.px[s], L.rows + L.pi[s], L.pi[s + 1] - L.pi[s],
+                                     L.super[s + 1] - L.super[s], static_cast<std::size_t>(L.super[s])},
+                   W, scratch);
+  for (int s = L.nsuper - 1; s >= 0; --s)
+    backward<Lanes>(Supernode<Scalar>{L.x + L.px[s], L.rows + L.pi[s], L.pi[s + 1] - L.pi[s],
+                                      L.super[s + 1] - L.super[s], static_cast<std::size_t>(L.super[s])},
+                    W, scratch);
+}
+
+}  // namespace
+}  // namespace emu

@@ -1,0 +1,71 @@
+#pragma once
+// Forward and back substitution with a CHOLMOD supernodal LL' factor for a
+// few right-hand sides at once, reading each factor entry once per pass.
+//
+// Why not cholmod_solve2: with 2-4 right-hand sides CHOLMOD calls dtrsm and
+// dgemm per supernode, and OpenBLAS packs (copies) the supernode's panel
+// before every such thin product; at the 81k-tet fusiform's ACAP factor
+// (3.3M entries) the packing took as long as the products (perf:
+// dgemm_incopy / itcopy 14% of an EMU solve against dgemm_kernel's 9%;
+// docs/DESIGN.md, "The cost of an iteration").
+#include <vector>
+
+#include <cholmod.h>
+
+namespace emu {
+
+/// A supernodal LL' factor's panels (CHOLMOD's layout): supernode s holds
+/// columns super[s] .. super[s+1]-1 as a column-major panel of
+/// pi[s+1]-pi[s] rows at x + px[s], its row indices at rows + pi[s] (the
+/// diagonal block's first). Scalar: double (CHOLMOD's own values) or float
+/// (a rounded copy: half the bytes to stream).
+template <typename Scalar>
+struct SupernodalPanels {
+  int n = 0, nsuper = 0;
+  const int *super = nullptr, *pi = nullptr, *px = nullptr, *rows = nullptr;
+  const Scalar* x = nullptr;
+};
+
+/// The same layout with other values x (a rounded copy of p.x).
+template <typename To, typename From>
+SupernodalPanels<To> with_values(const SupernodalPanels<From>& p, const To* x) {
+  SupernodalPanels<To> q;
+  q.n = p.n;
+  q.nsuper = p.nsuper;
+  q.super = p.super;
+  q.pi = p.pi;
+  q.px = p.px;
+  q.rows = p.rows;
+  q.x = x;
+  return q;
+}
+
+/// The panels of a factorised CHOLMOD factor; throws std::logic_error unless
+/// it is a real, int-indexed supernodal LL' factor.
+SupernodalPanels<double> supernodal_panels(const cholmod_factor& L);
+
+/// Which build of the kernel: the best this CPU runs (AVX2 and FMA where
+/// present and compiled in), or one of them (tests run both).
+enum class SupernodalIsa { best, baseline, avx2 };
+
+/// True where the AVX2 + FMA kernel is compiled in and this CPU runs it.
+bool supernodal_solve_has_avx2();
+
+/// Solves L L^T Y = W in place, Lanes right-hand sides side by side.
+///   L        the factor's panels
+///   W        n by Lanes, row-major: row i holds entry i of every right-hand
+///            side in L's permuted order (P b; the caller applies L.Perm)
+///   scratch  resized as needed (the longest off-diagonal block times Lanes)
+/// Lanes is 1, 2 or 4 (pad three right-hand sides with a zero fourth: the
+/// lanes of a row are one SIMD-friendly unit). Each entry of L is read once
+/// by the forward and once by the backward pass; arithmetic is in double.
+/// Throws std::logic_error for isa = avx2 where the CPU or build lacks it.
+template <int Lanes, typename Scalar>
+void supernodal_solve_in_place(const SupernodalPanels<Scalar>& L, double* W, std::vector<double>& scratch,
+                               SupernodalIsa isa = SupernodalIsa::best);
+
+/// The AVX2 + FMA build (supernodal_solve_avx2.cpp; scratch sized by the caller).
+template <int Lanes, typename Scalar>
+void supernodal_solve_avx2(const SupernodalPanels<Scalar>& L, double* W, double* scratch);
+
+}  // namespace emu
