@@ -18,6 +18,21 @@
 using namespace emu;
 
 namespace {
+// The upper triangle of a dense symmetric matrix in compressed-column form.
+void upper_csc(const Eigen::MatrixXd& dense, std::vector<int>& p, std::vector<int>& i, std::vector<double>& x) {
+  p.assign(1, 0);
+  i.clear();
+  x.clear();
+  for (int col = 0; col < dense.cols(); ++col) {
+    for (int row = 0; row <= col; ++row)
+      if (dense(row, col) != 0.0) {
+        i.push_back(row);
+        x.push_back(dense(row, col));
+      }
+    p.push_back(static_cast<int>(i.size()));
+  }
+}
+
 // 2D grid Laplacian (n = g*g) plus a small diagonal shift: SPD. Upper CSC.
 void grid_laplacian(int g, double shift, std::vector<int>& p, std::vector<int>& i, std::vector<double>& x,
                     Eigen::MatrixXd& dense) {
@@ -36,17 +51,7 @@ void grid_laplacian(int g, double shift, std::vector<int>& p, std::vector<int>& 
         dense(v, v) += 1; dense(w, w) += 1; dense(v, w) -= 1; dense(w, v) -= 1;
       }
     }
-  p.assign(1, 0);
-  i.clear();
-  x.clear();
-  for (int col = 0; col < n; ++col) {
-    for (int row = 0; row <= col; ++row)
-      if (dense(row, col) != 0.0) {
-        i.push_back(row);
-        x.push_back(dense(row, col));
-      }
-    p.push_back(static_cast<int>(i.size()));
-  }
+  upper_csc(dense, p, i, x);
 }
 }  // namespace
 
@@ -122,17 +127,7 @@ static void grid_laplacian_3d(int g, double shift, std::vector<int>& p, std::vec
           dense(v, v) += k; dense(w, w) += k; dense(v, w) -= k; dense(w, v) -= k;
         }
       }
-  p.assign(1, 0);
-  i.clear();
-  x.clear();
-  for (int col = 0; col < n; ++col) {
-    for (int row = 0; row <= col; ++row)
-      if (dense(row, col) != 0.0) {
-        i.push_back(row);
-        x.push_back(dense(row, col));
-      }
-    p.push_back(static_cast<int>(i.size()));
-  }
+  upper_csc(dense, p, i, x);
 }
 
 TEST(supernodal_solve_of_few_right_hand_sides_matches_dense_and_cholmod) {
