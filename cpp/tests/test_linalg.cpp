@@ -3,6 +3,8 @@
 #include <random>
 #include <stdexcept>
 
+#include <omp.h>
+
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
 #include <vector>
@@ -176,6 +178,9 @@ TEST(supernodal_solve_of_few_right_hand_sides_matches_dense_and_cholmod) {
   // dense solve with L~ L~^T) and within float round-off of the true one
   const cholmod_factor* L = f.factor();
   const SupernodalPanels<double> panels = supernodal_panels(*L);
+  // tasks of at least 1,000 entries (the default's 131,072 leaves this small factor one serial task)
+  const SupernodalSchedule order = supernodal_schedule(panels, 16, 1000);
+  CHECK(supernodal_schedule(panels).task_first.size() == 1 && supernodal_schedule(panels).top.empty());
   std::vector<float> rounded(static_cast<const double*>(L->x), static_cast<const double*>(L->x) + L->xsize);
   const SupernodalPanels<float> rounded_panels = with_values(panels, rounded.data());
   Eigen::MatrixXd Lr = Eigen::MatrixXd::Zero(n, n);  // the rounded factor, dense, in L's (permuted) order
@@ -192,26 +197,49 @@ TEST(supernodal_solve_of_few_right_hand_sides_matches_dense_and_cholmod) {
   const Eigen::MatrixXd ref = dense.solve(b);
   const Eigen::MatrixXd ref_rounded =
       Lr.transpose().triangularView<Eigen::Upper>().solve(Lr.triangularView<Eigen::Lower>().solve(bp));
+  // the schedule splits the tree (tasks and a top); its result has the same
+  // bits on 1 and 2 threads and agrees with one serial task to round-off
+  CHECK(order.task_first.size() >= 4 && !order.top.empty() && order.top_columns > 0);
+  {
+    SupernodalSchedule serial;
+    serial.task_first = {0};
+    serial.task_last = {panels.nsuper - 1};
+    serial.top_slot.assign(n, -1);
+    serial.longest = order.longest;
+    std::vector<double> scratch;
+    Eigen::MatrixXd one = Eigen::MatrixXd::Zero(4, n), two, alone;
+    one.topRows(3) = bp.transpose();
+    two = alone = one;
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    supernodal_solve_in_place<4>(panels, order, one.data(), scratch);
+    omp_set_num_threads(2);
+    supernodal_solve_in_place<4>(panels, order, two.data(), scratch);
+    supernodal_solve_in_place<4>(panels, serial, alone.data(), scratch);
+    omp_set_num_threads(threads);
+    CHECK((one - two).norm() == 0.0);
+    CHECK((one - alone).norm() <= 1e-12 * one.norm() && (one - alone).norm() > 0.0);
+  }
   std::vector<SupernodalIsa> isas = {SupernodalIsa::baseline};
   if (supernodal_solve_has_avx2()) isas.push_back(SupernodalIsa::avx2);
   std::vector<double> scratch;
   for (SupernodalIsa isa : isas) {
     Eigen::MatrixXd rows = Eigen::MatrixXd::Zero(4, n);  // column k: row k of the lanes
     rows.topRows(3) = bp.transpose();
-    supernodal_solve_in_place<4>(panels, rows.data(), scratch, isa);
+    supernodal_solve_in_place<4>(panels, order, rows.data(), scratch, isa);
     CHECK(rows.row(3).norm() == 0.0);
     for (int k = 0; k < n; ++k) CHECK((rows.col(k).head(3).transpose() - ref.row(perm[k])).norm() <= 1e-10 * ref.norm());
     rows.setZero();
     rows.topRows(3) = bp.transpose();
-    supernodal_solve_in_place<4>(rounded_panels, rows.data(), scratch, isa);
+    supernodal_solve_in_place<4>(rounded_panels, order, rows.data(), scratch, isa);
     CHECK((rows.topRows(3).transpose() - ref_rounded).norm() <= 1e-10 * ref_rounded.norm());
     double err = 0.0;
     for (int k = 0; k < n; ++k) err += (rows.col(k).head(3).transpose() - ref.row(perm[k])).squaredNorm();
     CHECK(std::sqrt(err) <= 1e-3 * ref.norm() && std::sqrt(err) > 1e-12 * ref.norm());  // rounded, not exact
     for (int lanes : {1, 2}) {  // one and two right-hand sides: the first columns
       Eigen::MatrixXd r = bp.leftCols(lanes).transpose();
-      if (lanes == 1) supernodal_solve_in_place<1>(panels, r.data(), scratch, isa);
-      else supernodal_solve_in_place<2>(panels, r.data(), scratch, isa);
+      if (lanes == 1) supernodal_solve_in_place<1>(panels, order, r.data(), scratch, isa);
+      else supernodal_solve_in_place<2>(panels, order, r.data(), scratch, isa);
       for (int k = 0; k < n; ++k)
         CHECK((r.col(k).transpose() - ref.row(perm[k]).head(lanes)).norm() <= 1e-10 * ref.norm());
     }

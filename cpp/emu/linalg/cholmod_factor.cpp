@@ -9,10 +9,11 @@
 namespace emu {
 namespace {
 template <typename Scalar>
-void solve_lanes(const SupernodalPanels<Scalar>& panels, int lanes, double* rows, std::vector<double>& scratch) {
-  if (lanes == 1) supernodal_solve_in_place<1>(panels, rows, scratch);
-  else if (lanes == 2) supernodal_solve_in_place<2>(panels, rows, scratch);
-  else supernodal_solve_in_place<4>(panels, rows, scratch);
+void solve_lanes(const SupernodalPanels<Scalar>& panels, const SupernodalSchedule& order, int lanes, double* rows,
+                 std::vector<double>& scratch) {
+  if (lanes == 1) supernodal_solve_in_place<1>(panels, order, rows, scratch);
+  else if (lanes == 2) supernodal_solve_in_place<2>(panels, order, rows, scratch);
+  else supernodal_solve_in_place<4>(panels, order, rows, scratch);
 }
 
 thread_local std::string last_cholmod_error;
@@ -56,6 +57,7 @@ void CholmodFactor::analyze(int n, const int* col_ptr, const int* row_index) {
   if (L_) cholmod_free_factor(&L_, &common_);
   if (A_) cholmod_free_sparse(&A_, &common_);
   factorized_ = false;
+  schedule_ = SupernodalSchedule();
   n_ = n;
   if (n == 0) return;  // nothing to factorise (every vertex pinned or on a bone): solves are empty
   const size_t nnz = static_cast<size_t>(col_ptr[n]);
@@ -75,6 +77,7 @@ void CholmodFactor::analyze_like(const CholmodFactor& other) {
   if (L_) cholmod_free_factor(&L_, &common_);
   if (A_) cholmod_free_sparse(&A_, &common_);
   factorized_ = false;
+  schedule_ = SupernodalSchedule();
   n_ = other.n_;
   if (n_ == 0) return;
   if (!other.A_ || !other.L_) throw std::logic_error("CholmodFactor::analyze_like of a factor not analysed");
@@ -162,8 +165,9 @@ void CholmodFactor::solve_rows(const double* b, double* x, int nrhs, bool single
     for (int r = 0; r < lanes; ++r) row[r] = r < nrhs ? b[p + static_cast<std::size_t>(r) * n_] : 0.0;
   }
   const SupernodalPanels<double> panels = supernodal_panels(*L_);
-  if (single_precision) solve_lanes(with_values(panels, rounded_.data()), lanes, rows_.data(), scratch_);
-  else solve_lanes(panels, lanes, rows_.data(), scratch_);
+  if (schedule_.top_slot.size() != static_cast<std::size_t>(n_)) schedule_ = supernodal_schedule(panels);
+  if (single_precision) solve_lanes(with_values(panels, rounded_.data()), schedule_, lanes, rows_.data(), scratch_);
+  else solve_lanes(panels, schedule_, lanes, rows_.data(), scratch_);
   for (int i = 0; i < n_; ++i) {
     const int p = perm ? perm[i] : i;
     const double* row = rows_.data() + static_cast<std::size_t>(i) * lanes;

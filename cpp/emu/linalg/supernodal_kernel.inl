@@ -49,9 +49,11 @@ inline Lane<Lanes>& lane(double* W, std::size_t k) {
 
 // Forward: y = L11^-1 w_s, then w_rows -= L21 y. L21 y is summed four columns
 // at a time into a local buffer (acc), so each panel entry is read once and a
-// row of W is updated once per supernode.
+// row of W is updated once per supernode. Rows from `limit` on (the top
+// columns, outside a task's subtree) are updated in the task's buffer
+// outside[top_slot[row]] instead of W.
 template <int Lanes, typename Scalar>
-void forward(const Supernode<Scalar>& s, double* W, double* acc) {
+void forward(const Supernode<Scalar>& s, double* W, double* acc, int limit, double* outside, const int* top_slot) {
   using Row = Lane<Lanes>;
   double* Wd = W + s.k1 * Lanes;
   // L11 y = w, four columns at a time: their 4x4 triangle, then the rows
@@ -96,7 +98,11 @@ void forward(const Supernode<Scalar>& s, double* W, double* acc) {
     const Row y = lane<Lanes>(Wd, j);
     for (int i = 0; i < nrect; ++i) lane<Lanes>(acc, i) += double(c[i]) * y;
   }
-  for (int i = 0; i < nrect; ++i) lane<Lanes>(W, s.rows[s.nscol + i]) -= lane<Lanes>(acc, i);
+  for (int i = 0; i < nrect; ++i) {
+    const int row = s.rows[s.nscol + i];
+    if (row < limit) lane<Lanes>(W, row) -= lane<Lanes>(acc, i);
+    else lane<Lanes>(outside, top_slot[row]) -= lane<Lanes>(acc, i);
+  }
 }
 
 // Backward: w_s -= L21^T x_rows (the rows gathered into xr once, four
@@ -164,18 +170,41 @@ void backward(const Supernode<Scalar>& s, double* W, double* xr) {
   }
 }
 
-// L L^T Y = W in place over all supernodes (scratch: the longest
-// off-diagonal block times Lanes doubles).
+// L L^T Y = W in place in the order of a schedule: forward, the tasks in
+// parallel (each with its slice of scratch: a buffer for the top columns,
+// then room for the longest off-diagonal block), their buffers summed into W
+// in task order, then the top supernodes; backward, the top supernodes, then
+// the tasks in parallel. The same bits for any thread count.
 template <int Lanes, typename Scalar>
-void solve_panels(const SupernodalPanels<Scalar>& L, double* W, double* scratch) {
-  for (int s = 0; s < L.nsuper; ++s)
-    forward<Lanes>(Supernode<Scalar>{L.x + L.px[s], L.rows + L.pi[s], L.pi[s + 1] - L.pi[s],
-                                     L.super[s + 1] - L.super[s], static_cast<std::size_t>(L.super[s])},
-                   W, scratch);
-  for (int s = L.nsuper - 1; s >= 0; --s)
-    backward<Lanes>(Supernode<Scalar>{L.x + L.px[s], L.rows + L.pi[s], L.pi[s + 1] - L.pi[s],
-                                      L.super[s + 1] - L.super[s], static_cast<std::size_t>(L.super[s])},
-                    W, scratch);
+void solve_panels(const SupernodalPanels<Scalar>& L, const ScheduleView& o, double* W, double* scratch) {
+  const std::size_t slice = static_cast<std::size_t>(o.top_columns + o.longest) * Lanes;
+  const std::size_t buffer = static_cast<std::size_t>(o.top_columns) * Lanes;
+  auto node = [&L](int s) {
+    return Supernode<Scalar>{L.x + L.px[s], L.rows + L.pi[s], L.pi[s + 1] - L.pi[s], L.super[s + 1] - L.super[s],
+                             static_cast<std::size_t>(L.super[s])};
+  };
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int t = 0; t < o.tasks; ++t) {
+    double* outside = scratch + t * slice;
+    for (std::size_t k = 0; k < buffer; ++k) outside[k] = 0.0;
+    const int limit = L.super[o.task_last[t] + 1];
+    for (int s = o.task_first[t]; s <= o.task_last[t]; ++s)
+      forward<Lanes>(node(s), W, outside + buffer, limit, outside, o.top_slot);
+  }
+  for (int t = 0; t < o.tasks; ++t) {
+    const double* outside = scratch + t * slice;
+    for (int q = 0; q < o.ntop; ++q)
+      for (int c = L.super[o.top[q]]; c < L.super[o.top[q] + 1]; ++c)
+        lane<Lanes>(W, c) += lane<Lanes>(const_cast<double*>(outside), o.top_slot[c]);
+  }
+  double* acc = scratch + buffer;  // task 0's block room, free again
+  for (int q = 0; q < o.ntop; ++q) forward<Lanes>(node(o.top[q]), W, acc, L.n, nullptr, o.top_slot);
+  for (int q = o.ntop - 1; q >= 0; --q) backward<Lanes>(node(o.top[q]), W, acc);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int t = 0; t < o.tasks; ++t) {
+    double* xr = scratch + t * slice + buffer;
+    for (int s = o.task_last[t]; s >= o.task_first[t]; --s) backward<Lanes>(node(s), W, xr);
+  }
 }
 
 }  // namespace

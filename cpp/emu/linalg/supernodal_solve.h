@@ -44,6 +44,28 @@ SupernodalPanels<To> with_values(const SupernodalPanels<From>& p, const To* x) {
 /// it is a real, int-indexed supernodal LL' factor.
 SupernodalPanels<double> supernodal_panels(const cholmod_factor& L);
 
+/// The order of a parallel solve: independent subtrees of the supernodal
+/// elimination tree (tasks, each a contiguous range of supernodes, as
+/// CHOLMOD postorders them) and the supernodes above them (top). A task's
+/// forward updates to the top columns go into its own buffer, summed in task
+/// order afterwards, so the result does not depend on the thread count.
+struct SupernodalSchedule {
+  std::vector<int> task_first, task_last;  // task t: supernodes task_first[t] .. task_last[t]
+  std::vector<int> top;                    // the other supernodes, ascending
+  std::vector<int> top_slot;               // per column: its row in a task's buffer (top columns), else -1
+  int top_columns = 0;
+  int longest = 0;                         // the longest off-diagonal block (rows)
+};
+
+/// A schedule of about `tasks` subtrees of similar work (entries), tasks =
+/// entries / task_entries between 1 and max_tasks (a small factor is not worth
+/// the tasks' buffers: one task, the serial order): the largest subtree is
+/// split at its root while it holds more than 1/tasks of the factor. Made
+/// from the factor alone, never from the thread count. One task of
+/// everything where the supernodes are not postordered.
+SupernodalSchedule supernodal_schedule(const SupernodalPanels<double>& L, int max_tasks = 16,
+                                       double task_entries = 131072);
+
 /// Which build of the kernel: the best this CPU runs (AVX2 and FMA where
 /// present and compiled in), or one of them (tests run both).
 enum class SupernodalIsa { best, baseline, avx2 };
@@ -55,17 +77,25 @@ bool supernodal_solve_has_avx2();
 ///   L        the factor's panels
 ///   W        n by Lanes, row-major: row i holds entry i of every right-hand
 ///            side in L's permuted order (P b; the caller applies L.Perm)
-///   scratch  resized as needed (the longest off-diagonal block times Lanes)
+///   order    supernodal_schedule(L's panels): tasks run in parallel (OpenMP)
+///   scratch  resized as needed (per task: its buffers of top columns and the
+///            longest off-diagonal block, times Lanes)
 /// Lanes is 1, 2 or 4 (pad three right-hand sides with a zero fourth: the
 /// lanes of a row are one SIMD-friendly unit). Each entry of L is read once
 /// by the forward and once by the backward pass; arithmetic is in double.
 /// Throws std::logic_error for isa = avx2 where the CPU or build lacks it.
 template <int Lanes, typename Scalar>
-void supernodal_solve_in_place(const SupernodalPanels<Scalar>& L, double* W, std::vector<double>& scratch,
-                               SupernodalIsa isa = SupernodalIsa::best);
+void supernodal_solve_in_place(const SupernodalPanels<Scalar>& L, const SupernodalSchedule& order, double* W,
+                               std::vector<double>& scratch, SupernodalIsa isa = SupernodalIsa::best);
+
+/// The schedule as plain arrays (the kernels' translation units use no std::vector).
+struct ScheduleView {
+  int tasks, ntop, top_columns, longest;
+  const int *task_first, *task_last, *top, *top_slot;
+};
 
 /// The AVX2 + FMA build (supernodal_solve_avx2.cpp; scratch sized by the caller).
 template <int Lanes, typename Scalar>
-void supernodal_solve_avx2(const SupernodalPanels<Scalar>& L, double* W, double* scratch);
+void supernodal_solve_avx2(const SupernodalPanels<Scalar>& L, const ScheduleView& order, double* W, double* scratch);
 
 }  // namespace emu

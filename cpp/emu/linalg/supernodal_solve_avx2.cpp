@@ -6,15 +6,15 @@
 namespace emu {
 
 template <int Lanes, typename Scalar>
-void supernodal_solve_avx2(const SupernodalPanels<Scalar>& L, double* W, double* scratch) {
-  solve_panels<Lanes, Scalar>(L, W, scratch);
+void supernodal_solve_avx2(const SupernodalPanels<Scalar>& L, const ScheduleView& order, double* W, double* scratch) {
+  solve_panels<Lanes, Scalar>(L, order, W, scratch);
 }
 
-template void supernodal_solve_avx2<1, double>(const SupernodalPanels<double>&, double*, double*);
-template void supernodal_solve_avx2<2, double>(const SupernodalPanels<double>&, double*, double*);
-template void supernodal_solve_avx2<4, double>(const SupernodalPanels<double>&, double*, double*);
-template void supernodal_solve_avx2<1, float>(const SupernodalPanels<float>&, double*, double*);
-template void supernodal_solve_avx2<2, float>(const SupernodalPanels<float>&, double*, double*);
-template void supernodal_solve_avx2<4, float>(const SupernodalPanels<float>&, double*, double*);
+template void supernodal_solve_avx2<1, double>(const SupernodalPanels<double>&, const ScheduleView&, double*, double*);
+template void supernodal_solve_avx2<2, double>(const SupernodalPanels<double>&, const ScheduleView&, double*, double*);
+template void supernodal_solve_avx2<4, double>(const SupernodalPanels<double>&, const ScheduleView&, double*, double*);
+template void supernodal_solve_avx2<1, float>(const SupernodalPanels<float>&, const ScheduleView&, double*, double*);
+template void supernodal_solve_avx2<2, float>(const SupernodalPanels<float>&, const ScheduleView&, double*, double*);
+template void supernodal_solve_avx2<4, float>(const SupernodalPanels<float>&, const ScheduleView&, double*, double*);
 
 }  // namespace emu
