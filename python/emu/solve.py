@@ -243,10 +243,10 @@ class Solver:
                   correction (default 4; 0: off. At the strict tolerance 4 cut
                   realistic_biceps from 6,754 to 3,056 CG iterations and the
                   bone scenes' total time by 40%, docs/DESIGN.md)
-    single_precision_s0  EMU, preconditioner "constant-schur" on a scene without movable
-                  bones: its S0 solves (one per CG iteration) with the factor rounded to
-                  float, half the bytes streamed (a fixed SPD preconditioner still: CG's
-                  path changes, not the answer; docs/DESIGN.md, "The cost of an iteration")
+    single_precision_s0  EMU, preconditioner "constant-schur": its S0 solves (one per CG
+                  iteration) with the factor rounded to float, half the bytes streamed (a
+                  fixed SPD preconditioner still: CG's path changes, not the answer;
+                  docs/DESIGN.md, "The cost of an iteration")
     threads       OpenMP and OpenBLAS threads (None: leave as is)
     error_estimate  EMU: estimate every solve's error to FEM (Solution.error_estimate;
                   one or two sparse factorisations of the FEM Hessian per

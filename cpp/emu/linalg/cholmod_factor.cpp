@@ -1,5 +1,6 @@
 #include "emu/linalg/cholmod_factor.h"
 
+#include <algorithm>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -127,9 +128,10 @@ void CholmodFactor::solve(const double* b, double* x, int nrhs, bool single_prec
   if (!factorized_) throw std::logic_error("CholmodFactor::solve before a successful factorize");
   if (n_ == 0) return;
   if (single_precision) {
-    if (!keep_rounded_ || nrhs > 4)
+    if (!keep_rounded_)
       throw std::logic_error("CholmodFactor::solve in single precision without keep_single_precision_copy");
-    solve_rows(b, x, nrhs, true);
+    for (int c = 0; c < nrhs; c += 4)  // four right-hand sides at a time
+      solve_rows(b + static_cast<std::size_t>(c) * n_, x + static_cast<std::size_t>(c) * n_, std::min(4, nrhs - c), true);
     return;
   }
   // 2-4 right-hand sides of a supernodal factor: supernodal_solve_in_place

@@ -44,8 +44,8 @@ class CholmodFactor {
   void keep_single_precision_copy();
 
   /// x = A^-1 b for nrhs right-hand sides; b and x are n x nrhs column-major
-  /// (they may alias). single_precision: with the rounded copy (1-4
-  /// right-hand sides), x = (L~ L~^T)^-1 b for the rounded factor L~.
+  /// (they may alias). single_precision: with the rounded copy, x = (L~
+  /// L~^T)^-1 b for the rounded factor L~.
   void solve(const double* b, double* x, int nrhs, bool single_precision = false) const;
 
   int rows() const { return n_; }

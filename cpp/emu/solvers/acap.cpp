@@ -57,8 +57,9 @@ Eigen::Vector4d phi_of(const Model& model, const UnknownLayout& layout, int v, i
 }  // namespace
 
 AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd* weight_volume,
-                           const AcapOperator* pattern_of)
-    : model_(model), layout_(layout), pattern_(model.tets, layout.free_index, layout.num_free, 1) {
+                           const AcapOperator* pattern_of, bool single_precision)
+    : rounded_(single_precision), model_(model), layout_(layout),
+      pattern_(model.tets, layout.free_index, layout.num_free, 1) {
   const Eigen::Index m = model.tets.rows();
   ns_ = layout.num_free;
   nq_ = 4 * layout.num_bones;
@@ -81,6 +82,7 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
     throw std::invalid_argument(
         "the ACAP matrix is singular: some part of the mesh is not connected to a pinned vertex, "
         "fixed bone or movable bone; pin a vertex of every connected component");
+  if (rounded_) factor_.keep_single_precision_copy();  // before setup_bones: its solves use it too
   corner_.resize(m * 12);
   rhs_rows_.resize(ns_, 3);
   if (nq_) setup_bones();
@@ -137,7 +139,7 @@ void AcapOperator::setup_bones() {
     }
   }
   W_.resize(ns_, nq_);
-  factor_.solve(Lsb.data(), W_.data(), nq_);
+  factor_.solve(Lsb.data(), W_.data(), nq_, rounded_);
   Sb_ = Lbb - Lsb.transpose() * W_;
   Sb_ = 0.5 * (Sb_ + Sb_.transpose()).eval();
   // Joint rows.
@@ -195,7 +197,7 @@ void AcapOperator::solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h
   Z.resize(dofs(), nc);
   Eigen::MatrixXd y0(ns_, nc);
   Eigen::MatrixXd Rs = R.topRows(ns_);
-  factor_.solve(Rs.data(), y0.data(), nc);
+  factor_.solve(Rs.data(), y0.data(), nc, rounded_);
   if (!nq_) {
     Z = y0;
     return;

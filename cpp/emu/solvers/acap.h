@@ -52,8 +52,11 @@ class AcapOperator {
   /// weight_volume  #T per-tet weights of the fit (nullptr: the ACAP weights
   ///                w_t V_t; ConstantSchur builds the same operator with others)
   /// pattern_of     an operator of the same model whose symbolic analysis is reused (nullptr: analyse)
+  /// single_precision  every solve with the factor rounded to float, the bone
+  ///                elimination's included: the exact inverse of the rounded
+  ///                matrix, for a preconditioner (ConstantSchur's own S0)
   AcapOperator(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd* weight_volume = nullptr,
-               const AcapOperator* pattern_of = nullptr);
+               const AcapOperator* pattern_of = nullptr, bool single_precision = false);
 
   /// Number of scalar position unknowns per coordinate: num_free + 4 #bones.
   int dofs() const { return ns_ + nq_; }
@@ -75,7 +78,8 @@ class AcapOperator {
   void solve(const Eigen::MatrixXd& R, Eigen::MatrixXd& Z) const { solve_with(R, nullptr, Z); }
   /// Z = K~^-1 R with the factor rounded to single precision (after
   /// keep_single_precision_copy; operators without movable bones only): for
-  /// a preconditioner, half the bytes streamed (ConstantSchur).
+  /// a preconditioner sharing the fit's operator, half the bytes streamed
+  /// (ConstantSchur where S0 = c K).
   void solve_rounded(const Eigen::MatrixXd& R, Eigen::MatrixXd& Z) const;
   void keep_single_precision_copy() { factor_.keep_single_precision_copy(); }
 
@@ -110,6 +114,7 @@ class AcapOperator {
   template <class TargetOf>
   void apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const;
 
+  bool rounded_ = false;  // single_precision: every factor solve with the rounded copy
   const Model& model_;
   const UnknownLayout& layout_;
   BlockPattern pattern_;

@@ -45,13 +45,16 @@ void ConstantSchur::set_alpha(double alpha) {
     s0_.reset();
   } else {
     scale_ = 1.0;
-    s0_ = std::make_unique<AcapOperator>(model_, layout_, &e, &acap_);  // the ACAP matrix's pattern
+    // the ACAP matrix's pattern; rounded, every solve of it (the bone
+    // elimination's too) is the exact inverse of the rounded matrix
+    s0_ = std::make_unique<AcapOperator>(model_, layout_, &e, &acap_, single_precision_);
   }
-  // with movable bones S0's solve also eliminates the bone unknowns through
-  // quantities solved in double (AcapOperator::solve_with); rounding only the
-  // factor there would make the preconditioner slightly unsymmetric
-  rounded_ = single_precision_ && !s0().has_bones();
-  if (rounded_) (s0_ ? *s0_ : acap_).keep_single_precision_copy();
+  // S0 = c K shares the fit's operator, which must stay exact: a rounded copy
+  // of its factor beside it (solve_rounded: operators without movable bones;
+  // a bone scene always has its own S0, a bone tet's e_t being w V and a soft
+  // tet's less)
+  rounded_ = single_precision_ && (s0_ != nullptr || !acap_.has_bones());
+  if (rounded_ && !s0_) acap_.keep_single_precision_copy();
 }
 
 bool ConstantSchur::update(const std::vector<Mat9>& A) {
@@ -78,8 +81,8 @@ void ConstantSchur::apply(const Mat9X& r, Mat9X& out) const {
   apply_schur_form(layout_, acap_, Ainv_, alpha_ / scale_, r, out, work_,
                    [&](const Eigen::MatrixX3d& y, Eigen::MatrixX3d& u) {
                      rhs_ = y;
-                     if (rounded_) s0().solve_rounded(rhs_, z_);
-                     else s0().solve(rhs_, z_);
+                     if (rounded_ && !s0_) acap_.solve_rounded(rhs_, z_);
+                     else s0().solve(rhs_, z_);  // s0_: rounded where built so
                      u = z_;
                    });
 }

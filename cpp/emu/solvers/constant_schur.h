@@ -38,9 +38,9 @@ namespace emu {
 
 class ConstantSchur {
  public:
-  /// single_precision: S0's solves with its factor rounded to float where S0
-  /// has no movable bones (EmuOptions::single_precision_s0); acap keeps that
-  /// copy of its factor where S0 = c K.
+  /// single_precision: S0's solves with its factor rounded to float
+  /// (EmuOptions::single_precision_s0): S0's own factor, or, where S0 = c K
+  /// on a scene without movable bones, a rounded copy of acap's.
   ConstantSchur(const Model& model, const UnknownLayout& layout, AcapOperator& acap, double alpha,
                 bool single_precision = true);
 

@@ -93,9 +93,9 @@ struct EmuOptions {
   // in the coarse space of later steps, at most this many (0: off)
   int recycled_directions = 4;
   // ConstantSchur: S0's solves (one per CG iteration) with its factor rounded
-  // to single precision where S0 has no movable bones: half the bytes of a
-  // back-substitution that streams the whole factor (docs/DESIGN.md, "The
-  // cost of an iteration"); the preconditioner stays one fixed SPD matrix
+  // to single precision: half the bytes of a back-substitution that streams
+  // the whole factor (docs/DESIGN.md, "The cost of an iteration"); the
+  // preconditioner stays one fixed SPD matrix
   bool single_precision_s0 = true;
   int lbfgs_memory = 8;  // EmuStep::Lbfgs: the (s, y) pairs kept
 };
