@@ -227,7 +227,6 @@ TEST(acap_rigid_tets_keep_c_and_ct_adjoint) {
   CHECK(worst <= 1e-12 * CTu.norm());
 }
 
-TEST_MAIN()
 
 // An operator built in single precision (ConstantSchur's own S0) solves with
 // the rounded factor everywhere, the bone elimination included: one
@@ -253,3 +252,5 @@ TEST(acap_single_precision_operator_with_bones_stays_symmetric) {
   CHECK(std::abs(uKv - vKu) <= 1e-11 * Ku.norm() * v.norm());
   CHECK((Ku - Ke).norm() <= 1e-4 * Ke.norm() && (Ku - Ke).norm() > 0.0);
 }
+
+TEST_MAIN()

@@ -413,6 +413,7 @@ class Solver:
             eo.single_precision_s0 = bool(single_precision_s0)
             self._core = _core.EmuSolver(self.model, opts, eo)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
+                                 single_precision_s0=eo.single_precision_s0,
                                  preconditioner=preconditioner if step == "newton-krylov" else None,
                                  cg_model_decrease=eo.cg_model_decrease if step == "newton-krylov" else None,
                                  cg_forcing_min=eo.cg_forcing_min if step == "newton-krylov" else None)

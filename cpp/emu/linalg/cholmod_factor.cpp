@@ -106,6 +106,8 @@ bool CholmodFactor::factorize(const double* values) {
 }
 
 void CholmodFactor::keep_single_precision_copy() {
+  if (keep_rounded_) return;  // kept already (and refreshed by every factorize)
+  if (L_ && !L_->is_super) throw std::logic_error("CholmodFactor: a single-precision copy needs a supernodal factor");
   keep_rounded_ = true;
   if (factorized_) round_panels();
 }

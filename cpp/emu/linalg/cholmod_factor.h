@@ -70,8 +70,8 @@ class CholmodFactor {
   mutable cholmod_dense* E_ = nullptr;
   std::vector<float> rounded_;  // keep_single_precision_copy: L's panels rounded
   bool keep_rounded_ = false;
-  mutable std::vector<double> rows_, scratch_;
-  mutable SupernodalSchedule schedule_;  // of L's supernodes, made at the first solve_rows after analyze  // solve_rows' work: n x lanes, and its supernode buffer
+  mutable std::vector<double> rows_, scratch_;  // solve_rows' work: n x lanes, and the kernel's buffers
+  mutable SupernodalSchedule schedule_;  // of L's supernodes, made at the first solve_rows after analyze
   int n_ = 0;
   bool factorized_ = false;
 };

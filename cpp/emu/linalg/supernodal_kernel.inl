@@ -1,8 +1,9 @@
 // The supernodal forward and back substitution kernels (supernodal_solve.h),
 // included by two translation units: supernodal_solve.cpp (the baseline ISA)
 // and supernodal_solve_avx2.cpp (-mavx2 -mfma, chosen at run time). Everything
-// here has internal linkage and calls nothing but built-ins, so no function
-// compiled for AVX2 can be picked by the linker for the baseline path.
+// here has internal linkage and calls only baseline code (OpenMP's runtime,
+// memset), so no function compiled for AVX2 can be picked by the linker for
+// the baseline path.
 #include <cstddef>
 
 #include "emu/linalg/supernodal_solve.h"
@@ -183,7 +184,7 @@ void solve_panels(const SupernodalPanels<Scalar>& L, const ScheduleView& o, doub
     return Supernode<Scalar>{L.x + L.px[s], L.rows + L.pi[s], L.pi[s + 1] - L.pi[s], L.super[s + 1] - L.super[s],
                              static_cast<std::size_t>(L.super[s])};
   };
-#pragma omp parallel for schedule(dynamic, 1)
+#pragma omp parallel for schedule(dynamic, 1) if (o.tasks > 1)
   for (int t = 0; t < o.tasks; ++t) {
     double* outside = scratch + t * slice;
     for (std::size_t k = 0; k < buffer; ++k) outside[k] = 0.0;
@@ -200,7 +201,7 @@ void solve_panels(const SupernodalPanels<Scalar>& L, const ScheduleView& o, doub
   double* acc = scratch + buffer;  // task 0's block room, free again
   for (int q = 0; q < o.ntop; ++q) forward<Lanes>(node(o.top[q]), W, acc, L.n, nullptr, o.top_slot);
   for (int q = o.ntop - 1; q >= 0; --q) backward<Lanes>(node(o.top[q]), W, acc);
-#pragma omp parallel for schedule(dynamic, 1)
+#pragma omp parallel for schedule(dynamic, 1) if (o.tasks > 1)
   for (int t = 0; t < o.tasks; ++t) {
     double* xr = scratch + t * slice + buffer;
     for (int s = o.task_last[t]; s >= o.task_first[t]; --s) backward<Lanes>(node(s), W, xr);

@@ -52,11 +52,8 @@ SupernodalSchedule supernodal_schedule(const SupernodalPanels<double>& L, int ma
     children[p].push_back(s);
   }
   for (int s = 0; s < ns && postordered; ++s) postordered = size[s] == s - first[s] + 1;  // subtree = first .. s
-  if (!postordered) {  // one task of everything: the solve runs serially, in supernode order
-    o.task_first = {0};
-    o.task_last = {ns - 1};
-    return o;
-  }
+  if (!postordered)
+    throw std::logic_error("supernodal_schedule: the supernodes are not in postorder (CHOLMOD's default)");
   // split the largest subtree at its root while it holds more than 1/tasks of all entries
   double total = 0.0;
   std::priority_queue<std::pair<double, int>> open;  // (subtree entries, root)

@@ -57,12 +57,14 @@ struct SupernodalSchedule {
   int longest = 0;                         // the longest off-diagonal block (rows)
 };
 
-/// A schedule of about `tasks` subtrees of similar work (entries), tasks =
-/// entries / task_entries between 1 and max_tasks (a small factor is not worth
-/// the tasks' buffers: one task, the serial order): the largest subtree is
-/// split at its root while it holds more than 1/tasks of the factor. Made
-/// from the factor alone, never from the thread count. One task of
-/// everything where the supernodes are not postordered.
+/// A schedule of subtrees of similar work (entries): with k = entries /
+/// task_entries between 1 and max_tasks, the largest subtree is split at its
+/// root while it holds more than 1/k of the factor; each tree of the forest
+/// and each child of a split root left below that is a task (so a small
+/// connected factor is one task, the serial order, without buffers; there
+/// can be more than max_tasks tasks). Made from the factor alone, never from
+/// the thread count. Throws std::logic_error where the supernodes are not in
+/// postorder (CHOLMOD postorders them by default).
 SupernodalSchedule supernodal_schedule(const SupernodalPanels<double>& L, int max_tasks = 16,
                                        double task_entries = 131072);
 

@@ -48,7 +48,6 @@ void reduce_to_unknowns(const UnknownLayout& layout, Mat9X& per_tet, Mat9X& out)
 
 class AcapOperator {
  public:
-
   /// weight_volume  #T per-tet weights of the fit (nullptr: the ACAP weights
   ///                w_t V_t; ConstantSchur builds the same operator with others)
   /// pattern_of     an operator of the same model whose symbolic analysis is reused (nullptr: analyse)
