@@ -51,9 +51,8 @@ void ConstantSchur::set_alpha(double alpha) {
   // S0 = c K shares the fit's operator, which must stay exact: a rounded copy
   // of its factor beside it (solve_rounded: operators without movable bones;
   // a bone scene always has its own S0, a bone tet's e_t being w V and a soft
-  // tet's less)
-  // (Whether S0 = c K depends on the tissues, not on alpha: a copy kept
-  // for it is never left behind by a later alpha.)
+  // tet's less). Whether S0 = c K depends on the tissues, not on alpha, so
+  // such a copy is never left behind by a later alpha.
   rounded_ = single_precision_ && (s0_ != nullptr || !acap_.has_bones());
   if (rounded_ && !s0_) acap_.keep_single_precision_copy();
 }

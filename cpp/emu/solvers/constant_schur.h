@@ -64,8 +64,6 @@ class ConstantSchur {
   double bytes() const {
     return 8.0 * factor_nnz() + (rounded_ ? 4.0 * s0().factor().factor_nnz() : 0.0) + sizeof(Mat9) * double(Ainv_.size());
   }
-  /// True where S0's solves use the single-precision factor.
-  bool single_precision() const { return rounded_; }
 
  private:
   const Model& model_;
