@@ -23,13 +23,21 @@ BlockPattern::BlockPattern(const Eigen::MatrixX4i& T, const Eigen::VectorXi& fre
         if (vi < 0 || vj < 0 || vi > vj) continue;
         entries.push_back({vi, vj, static_cast<int>(t), a * 4 + b});
       }
-  // Column-major order of blocks; contributions in (tet, corner) order.
-  std::sort(entries.begin(), entries.end(), [](const Entry& p, const Entry& q) {
-    if (p.vj != q.vj) return p.vj < q.vj;
-    if (p.vi != q.vi) return p.vi < q.vi;
-    if (p.t != q.t) return p.t < q.t;
-    return p.ab < q.ab;
-  });
+  // Column-major order of blocks, contributions in (tet, corner) order: the
+  // entries are made in (t, ab) order, so two stable counting sorts, by vi and
+  // then by vj, leave them in (vj, vi, t, ab) order in linear time (a
+  // comparison sort was a quarter of EMU's setup at 80k tets).
+  std::vector<Entry> sorted(entries.size());
+  std::vector<int> start(static_cast<size_t>(num_free_) + 1);
+  auto stable_sort_by = [&](int Entry::*key) {
+    std::fill(start.begin(), start.end(), 0);
+    for (const Entry& e : entries) ++start[e.*key + 1];
+    for (int v = 0; v < num_free_; ++v) start[v + 1] += start[v];
+    for (const Entry& e : entries) sorted[start[e.*key]++] = e;
+    entries.swap(sorted);
+  };
+  stable_sort_by(&Entry::vi);
+  stable_sort_by(&Entry::vj);
   // Unique blocks.
   std::vector<int> blk_vi, blk_vj;
   contrib_ptr_.push_back(0);

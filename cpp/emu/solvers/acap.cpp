@@ -59,7 +59,8 @@ Eigen::Vector4d phi_of(const Model& model, const UnknownLayout& layout, int v, i
 AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd* weight_volume,
                            const AcapOperator* pattern_of, bool single_precision)
     : rounded_(single_precision), model_(model), layout_(layout),
-      pattern_(model.tets, layout.free_index, layout.num_free, 1) {
+      pattern_(pattern_of ? pattern_of->pattern_
+                          : std::make_shared<const BlockPattern>(model.tets, layout.free_index, layout.num_free, 1)) {
   const Eigen::Index m = model.tets.rows();
   ns_ = layout.num_free;
   nq_ = 4 * layout.num_bones;
@@ -74,10 +75,10 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
     const ShapeGrads& b = layout.geometry.grad[t];
     Eigen::Map<Eigen::Matrix4d>(element.data() + t * 16) = wv_(t) * b * b.transpose();
   }
-  std::vector<double> values(pattern_.nnz());
-  pattern_.assemble(element.data(), values.data());
+  std::vector<double> values(pattern_->nnz());
+  pattern_->assemble(element.data(), values.data());
   if (pattern_of) factor_.analyze_like(pattern_of->factor_);
-  else factor_.analyze(pattern_.rows(), pattern_.col_ptr().data(), pattern_.row_index().data());
+  else factor_.analyze(pattern_->rows(), pattern_->col_ptr().data(), pattern_->row_index().data());
   if (!factor_.factorize(values.data()))
     throw std::invalid_argument(
         "the ACAP matrix is singular: some part of the mesh is not connected to a pinned vertex, "
@@ -231,7 +232,7 @@ void corner_targets(const Eigen::VectorXd& wv, const UnknownLayout& layout, Targ
 template <class TargetOf>
 void AcapOperator::apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const {
   corner_targets(wv_, layout_, target, is_rigid_, corner_.data());
-  pattern_.gather(corner_.data(), 3, rhs_rows_.data());
+  pattern_->gather(corner_.data(), 3, rhs_rows_.data());
   R.resize(dofs(), 3);
   R.topRows(ns_) = rhs_rows_;
   if (!nq_) return;

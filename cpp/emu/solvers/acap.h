@@ -20,6 +20,7 @@
 // one back-substitution plus small dense work: the constant-matrix property is
 // kept. The bone problem is solved in the null space of J (SVD once), which
 // also drops redundant joint rows. alpha cancels from the fit.
+#include <memory>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -50,7 +51,8 @@ class AcapOperator {
  public:
   /// weight_volume  #T per-tet weights of the fit (nullptr: the ACAP weights
   ///                w_t V_t; ConstantSchur builds the same operator with others)
-  /// pattern_of     an operator of the same model whose symbolic analysis is reused (nullptr: analyse)
+  /// pattern_of     an operator of the same model whose assembly pattern and
+  ///                symbolic analysis are reused (nullptr: its own)
   /// single_precision  every solve with the factor rounded to float, the bone
   ///                elimination's included: the exact inverse of the rounded
   ///                matrix, for a preconditioner (ConstantSchur's own S0)
@@ -116,7 +118,7 @@ class AcapOperator {
   bool rounded_ = false;  // single_precision: every factor solve with the rounded copy
   const Model& model_;
   const UnknownLayout& layout_;
-  BlockPattern pattern_;
+  std::shared_ptr<const BlockPattern> pattern_;  // shared with pattern_of's (read only)
   CholmodFactor factor_;
   Eigen::VectorXd wv_;
   int ns_ = 0, nq_ = 0, rank_ = 0;
