@@ -489,11 +489,11 @@ def test_constant_schur_preconditioner_against_numpy(eps, alpha, tendon_fraction
     symmetric positive definite; and, as for any block factorisation with an
     approximate Schur complement, the eigenvalues of M^-1 H lie between
     min(1, eig(S0^-1 S)) and max(1, eig(S0^-1 S)), S = K - alpha C A^-1 C^T.
-    A new alpha refactorises S0 (the weights change). With S0's factor rounded
-    to float (single_precision_s0, the default) the vectors differ from these
-    by float round-off, not more."""
+    A new alpha refactorises S0 (the weights change). With S0's factor and the
+    block inverses rounded to float (single_precision_preconditioner, the
+    default) the vectors differ from these by float round-off, not more."""
     s, _ = small_scene(2, tendon_fraction=tendon_fraction)
-    solver = emu.Solver(s, "emu", alpha=100.0, preconditioner="constant-schur", single_precision_s0=False)
+    solver = emu.Solver(s, "emu", alpha=100.0, preconditioner="constant-schur", single_precision_preconditioner=False)
     core = solver._core
     core.alpha = alpha * solver.mu_ref
     R = Reference(solver)
@@ -526,17 +526,27 @@ def test_constant_schur_preconditioner_against_numpy(eps, alpha, tendon_fraction
         emu.Solver(s, "emu", alpha=100.0, preconditioner="woodbury")._core.constant_schur_solve(load, F, Rhs)
 
 
-def test_single_precision_s0_with_bones_changes_cg_not_the_answer():
+def test_single_precision_preconditioner_with_bones_changes_cg_not_the_answer():
     """With movable bones the constant Schur preconditioner's own S0 is solved
-    with its factor rounded to float, the bone elimination included (one
-    symmetric SPD preconditioner still): the arm's strict solve reaches the
-    same answer in about as many CG iterations as with the double factor."""
+    with its factor rounded to float, the bone elimination included, and the
+    block inverses are kept in float (one symmetric SPD preconditioner still):
+    the arm's strict solve reaches the same answer in about as many CG
+    iterations as in double."""
     s = emu.scenes.arm(2)
     sols = {}
     for single in (False, True):
-        solver = emu.Solver(s, "emu", alpha=100.0, error_estimate=False, single_precision_s0=single)
+        solver = emu.Solver(s, "emu", alpha=100.0, error_estimate=False, single_precision_preconditioner=single)
         sols[single] = solver.solve({"flexor": 0.45}, normalized=True)
         assert sols[single].converged, sols[single].status
     assert emu.vertex_error(sols[True].positions, sols[False].positions) <= 1e-6
     a, b = sols[False].cg_iterations, sols[True].cg_iterations
     assert a > 0 and abs(a - b) <= 0.15 * a + 2, (a, b)
+
+
+def test_single_precision_s0_is_the_old_name_of_single_precision_preconditioner():
+    """The option's name of 0.1.0 development still works, with a warning naming the new one."""
+    s, _ = small_scene(2)
+    with pytest.warns(DeprecationWarning, match="single_precision_preconditioner"):
+        solver = emu.Solver(s, "emu", alpha=100.0, error_estimate=False, single_precision_s0=False)
+    assert solver.settings["single_precision_preconditioner"] is False
+    assert emu.Solver(s, "emu", alpha=100.0, error_estimate=False).settings["single_precision_preconditioner"] is True

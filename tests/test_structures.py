@@ -12,17 +12,18 @@ def test_pinned_muscle_builds_only_the_acap_factor_and_its_preconditioner():
     solver.solve({"belly": 5e4})
     built = solver.structures()
     assert set(built) == {"ACAP factor", "constant Schur preconditioner"}, built
-    # its own factor (the ACAP matrix's pattern) and one 9x9 inverse per tet
-    assert built["constant Schur preconditioner"] >= built["ACAP factor"] + 81 * 8 * len(s.tets)
-    # ... and, without movable bones, its factor's single-precision copy (4 bytes per entry)
-    assert built["constant Schur preconditioner"] >= 1.5 * built["ACAP factor"] + 81 * 8 * len(s.tets)
+    # its own factor (the ACAP matrix's pattern) and one 9x9 inverse per tet, in
+    # single precision by default (4 bytes per entry of both)
+    assert built["constant Schur preconditioner"] >= 1.5 * built["ACAP factor"] + 81 * 4 * len(s.tets)
+    double = emu.Solver(s, "emu", error_estimate=False, alpha=100, single_precision_preconditioner=False).structures()
+    assert double["constant Schur preconditioner"] >= double["ACAP factor"] + 81 * 8 * len(s.tets)
     # one tissue (no tendons): S0 is a multiple of K and K's factor serves, only the blocks are its own
-    # (and K's single-precision copy, unless single_precision_s0=False)
+    # (and K's single-precision copy, unless single_precision_preconditioner=False)
     one = fusiform(2, tendon_fraction=0.0, warn=False)
-    own = emu.Solver(one, "emu", error_estimate=False, alpha=100, single_precision_s0=False).structures()
+    own = emu.Solver(one, "emu", error_estimate=False, alpha=100, single_precision_preconditioner=False).structures()
     assert own["constant Schur preconditioner"] == 81 * 8 * len(one.tets), own
     rounded = emu.Solver(one, "emu", error_estimate=False, alpha=100).structures()
-    assert rounded["constant Schur preconditioner"] == 81 * 8 * len(one.tets) + rounded["ACAP factor"] / 2, rounded
+    assert rounded["constant Schur preconditioner"] == 81 * 4 * len(one.tets) + rounded["ACAP factor"] / 2, rounded
     woodbury = emu.Solver(s, "emu", error_estimate=False, alpha=100, preconditioner="woodbury")
     woodbury.solve({"belly": 5e4})
     built = woodbury.structures()

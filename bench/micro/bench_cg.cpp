@@ -30,6 +30,8 @@ struct EmuSolverProbe {
     eo.preconditioner = EmuPreconditioner::Woodbury;  // its modes; the constant Schur one is built beside it
     solver = std::make_unique<EmuSolver>(m, SolverOptions(), eo);
     constant_schur = std::make_unique<ConstantSchur>(solver->model_, solver->layout_, *solver->acap_, eo.alpha);
+    constant_schur_double =
+        std::make_unique<ConstantSchur>(solver->model_, solver->layout_, *solver->acap_, eo.alpha, false);
     const long n = solver->layout_.num_unknowns;
     std::mt19937 rng(2);
     std::normal_distribution<double> g(0.0, 0.05);
@@ -43,7 +45,8 @@ struct EmuSolverProbe {
     for (long u = 0; u < n; ++u)
       for (int i = 0; i < 81; ++i) A[u].data()[i] = blocks(u, i);  // a row: the column-major 9x9 block
     if (!solver->woodbury_->update(A)) throw std::runtime_error("bench_cg: the Woodbury matrix X is not definite");
-    if (!constant_schur->update(A)) throw std::runtime_error("bench_cg: a block is not definite");
+    if (!constant_schur->update(A) || !constant_schur_double->update(A))
+      throw std::runtime_error("bench_cg: a block is not definite");
     v = Mat9X::Zero(9, n);
     for (long i = 0; i < v.size(); ++i) v.data()[i] = g(rng);
   }
@@ -51,9 +54,11 @@ struct EmuSolverProbe {
   void fit(const Mat9X& in) {
     solver->fit_linear_into(in, dx, Fd);
   }
-  /// which: 0 the Woodbury preconditioner, 1 the constant Schur one
+  /// which: 0 the Woodbury preconditioner, 1 the constant Schur one (single
+  /// precision S0 and blocks, the default), 2 the constant Schur one in double
   void precondition(const Mat9X& in, Mat9X& out, int which = 0) const {
     if (which == 1) constant_schur->apply(in, out);
+    else if (which == 2) constant_schur_double->apply(in, out);
     else solver->woodbury_->apply(in, out);
   }
   void back_substitution(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& Z) const { solver->acap_->solve(rhs, Z); }
@@ -62,7 +67,7 @@ struct EmuSolverProbe {
   int modes() const { return solver->woodbury_->k(); }
 
   std::unique_ptr<EmuSolver> solver;
-  std::unique_ptr<ConstantSchur> constant_schur;
+  std::unique_ptr<ConstantSchur> constant_schur, constant_schur_double;
   std::vector<Mat9> A;
   Mat9X v, Fd;
   Eigen::MatrixX3d dx;
@@ -75,8 +80,14 @@ using namespace emu;
 namespace {
 // state.range(0): 0 = 8 x 8 x 45 hexes, 17,280 tets (fusiform_20k's size);
 // 1 = 5 x 5 x 28, 4,200 tets (the demo arm's soft tets): where the fixed
-// cost of a parallel pass shows.
+// cost of a parallel pass shows; 2 = 12 x 12 x 93, 80,352 tets
+// (fusiform_80k's size): every per-tet array streams from memory. Each is
+// built on first use.
 EmuSolverProbe& probe(int size) {
+  if (size == 2) {
+    static EmuSolverProbe huge(bar(12, 93));
+    return huge;
+  }
   static EmuSolverProbe large(bar(8, 45)), small(bar(5, 28));
   return size == 0 ? large : small;
 }
@@ -91,8 +102,10 @@ constexpr double kProduct = kFit + 81 + 27;
 // correction's per-tet values (9 written, 9 + 9 reduced), A^-1 of it added (81 + 9 + 18)
 constexpr double kWoodbury = 99 + 33 + 27 + 108;
 // constant Schur: the same per-tet passes as the Woodbury application (the S0
-// back-substitution, vertex-sized, in place of the thin mode products)
+// back-substitution, vertex-sized, in place of the thin mode products); with
+// single-precision blocks each block pass streams 81 floats, 40.5 doubles
 constexpr double kConstantSchur = kWoodbury;
+constexpr double kConstantSchurRounded = kWoodbury - 81;
 // PCG's vector work: d, r updated with |r|^2 (4 read, 2 written), r.z and p (3 read, 1 written)
 constexpr double kVectors = 6 + 4;
 
@@ -147,18 +160,22 @@ void woodbury_apply(benchmark::State& state) {
   state.counters["modes"] = p.modes();
 }
 
+// state.range(1): 1 single precision (S0's factor and the blocks, the
+// default), 2 double
 void constant_schur_apply(benchmark::State& state) {
   EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
+  const int which = static_cast<int>(state.range(1));
   Mat9X out;
   for (auto _ : state) {
-    p.precondition(p.v, out, 1);
+    p.precondition(p.v, out, which);
     benchmark::DoNotOptimize(out.data());
   }
-  report(state, kConstantSchur);
+  report(state, which == 1 ? kConstantSchurRounded : kConstantSchur);
 }
 
 // Whole PCG iterations (tolerance 0: none stops early), items = iterations x tets;
-// state.range(1): the preconditioner (0 Woodbury, 1 constant Schur).
+// state.range(1): the preconditioner (0 Woodbury, 1 constant Schur, 2 the
+// constant Schur one in double).
 void cg_iteration(benchmark::State& state) {
   EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
   const int which = static_cast<int>(state.range(1));
@@ -177,15 +194,22 @@ void cg_iteration(benchmark::State& state) {
   }
   const double n = static_cast<double>(p.unknowns());
   state.SetItemsProcessed(state.iterations() * iterations * static_cast<long>(n));
-  state.SetBytesProcessed(static_cast<long>(state.iterations() * iterations * n * (kProduct + kWoodbury + kVectors) * kB));
+  const double precondition = which == 1 ? kConstantSchurRounded : kWoodbury;
+  state.SetBytesProcessed(static_cast<long>(state.iterations() * iterations * n * (kProduct + precondition + kVectors) * kB));
   state.counters["tets"] = n;
 }
 }  // namespace
 
-BENCHMARK(fit)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
-BENCHMARK(back_substitution)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
-BENCHMARK(hessian_product)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+BENCHMARK(fit)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
+BENCHMARK(back_substitution)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
+BENCHMARK(hessian_product)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 BENCHMARK(woodbury_apply)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
-BENCHMARK(constant_schur_apply)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
-BENCHMARK(cg_iteration)->Args({0, 0})->Args({1, 0})->Args({0, 1})->Args({1, 1})->Unit(benchmark::kMillisecond);
+BENCHMARK(constant_schur_apply)
+    ->ArgsProduct({{0, 1, 2}, {1, 2}})
+    ->Unit(benchmark::kMicrosecond);
+BENCHMARK(cg_iteration)
+    ->ArgsProduct({{0, 1}, {0, 1, 2}})
+    ->Args({2, 1})
+    ->Args({2, 2})
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();

@@ -188,7 +188,7 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("preconditioner", &EmuOptions::preconditioner)
       .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space)
       .def_readwrite("recycled_directions", &EmuOptions::recycled_directions)
-      .def_readwrite("single_precision_s0", &EmuOptions::single_precision_s0)
+      .def_readwrite("single_precision_preconditioner", &EmuOptions::single_precision_preconditioner)
       .def_readwrite("lbfgs_memory", &EmuOptions::lbfgs_memory);
 
   py::class_<PhaseTimes>(m, "PhaseTimes")

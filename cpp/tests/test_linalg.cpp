@@ -13,6 +13,7 @@
 #include "emu/linalg/cholmod_factor.h"
 #include "emu/linalg/modes.h"
 #include "emu/linalg/negative_curvature.h"
+#include "emu/linalg/rounded_block.h"
 #include "emu/linalg/spd_inverse.h"
 #include "emu/linalg/supernodal_solve.h"
 #include "emu/linalg/symmetric_product.h"
@@ -363,6 +364,44 @@ TEST(cholmod_empty_matrix_factorises_and_solves_nothing) {
   CHECK(f.factorized());
   f.solve(nullptr, nullptr, 3);
   CHECK(f.rows() == 0 && f.factor_nnz() == 0.0);
+}
+
+// round_spd_block keeps an SPD block definite in float however ill
+// conditioned (a plain cast need not: shown on the same blocks), the stored
+// block is symmetric and not below the exact one, and it moves the block by
+// no more than its rounding bound; block_times applies the stored block.
+TEST(round_spd_block_stays_definite_and_above_the_exact_block) {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> g(0.0, 1.0);
+  using Mat9d = Eigen::Matrix<double, 9, 9>;
+  int plain_indefinite = 0;
+  for (double spread : {1e1, 1e6, 1e10}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      Mat9d Q;
+      for (int i = 0; i < 81; ++i) Q.data()[i] = g(rng);
+      Q = Eigen::HouseholderQR<Mat9d>(Q).householderQ();
+      Eigen::Matrix<double, 9, 1> lam;
+      for (int i = 0; i < 9; ++i) lam(i) = std::pow(spread, -double(i) / 8.0);
+      Mat9d B = Q * lam.asDiagonal() * Q.transpose();
+      B = (0.5 * (B + B.transpose())).eval();
+      Mat9f R;
+      round_spd_block(B, R);
+      const Mat9d Rd = R.cast<double>();
+      CHECK(Rd == Rd.transpose());
+      const double delta = 10.0 * std::ldexp(1.0, -24) * B.cwiseAbs().maxCoeff();
+      const Eigen::VectorXd shift = Eigen::SelfAdjointEigenSolver<Mat9d>(Rd - B).eigenvalues();
+      CHECK(shift(0) >= 0.0);          // R >= B: definite with B
+      CHECK(shift(8) <= 2.0 * delta);  // and close to it
+      CHECK(Eigen::LLT<Mat9d>(Rd).info() == Eigen::Success);
+      const Mat9d plain = B.cast<float>().cast<double>();
+      if (Eigen::SelfAdjointEigenSolver<Mat9d>(plain).eigenvalues()(0) <= 0.0) ++plain_indefinite;
+      Eigen::Matrix<double, 9, 1> x;
+      for (int i = 0; i < 9; ++i) x(i) = g(rng);
+      CHECK((block_times(R, x) - Rd * x).norm() <= 1e-15 * (Rd.norm() * x.norm()));
+      CHECK((block_times(B, x) - B * x).norm() <= 1e-15 * (B.norm() * x.norm()));
+    }
+  }
+  CHECK(plain_indefinite > 0);  // the shift is needed: a plain cast loses definiteness at condition 1e10
 }
 
 TEST(spd_inverse_matches_the_dense_inverse_and_refuses_indefinite_blocks) {

@@ -138,11 +138,11 @@ TEST(emu_and_fem_agree_as_alpha_grows) {
   CHECK(prev < 1e-2);
 }
 
-// The constant Schur preconditioner's S0 solves with the factor rounded to
-// float (EmuOptions::single_precision_s0, the default on a scene without
-// movable bones): the preconditioner changes CG's path, not the answer, and
-// CG needs about as many iterations as with the double factor.
-TEST(emu_single_precision_s0_changes_cg_not_the_answer) {
+// The constant Schur preconditioner in single precision (S0's factor and the
+// block inverses rounded to float; EmuOptions::single_precision_preconditioner,
+// the default): the preconditioner changes CG's path, not the answer, and CG
+// needs about as many iterations as in double.
+TEST(emu_single_precision_preconditioner_changes_cg_not_the_answer) {
   const Model m = bar(3, 16);
   const LoadCase l = load(3e4);
   const double diag = (m.rest.colwise().maxCoeff() - m.rest.colwise().minCoeff()).norm();
@@ -150,16 +150,17 @@ TEST(emu_single_precision_s0_changes_cg_not_the_answer) {
   for (int single : {0, 1}) {
     EmuOptions eo;
     eo.alpha = 100 * m.mu(0);
-    eo.single_precision_s0 = single == 1;
+    eo.single_precision_preconditioner = single == 1;
     EmuSolver emu(m, SolverOptions{}, eo);
     r[single] = emu.solve(l);
     CHECK(r[single].converged);
-    // the rounded copy is listed with the preconditioner's bytes: 4 per factor entry more
+    // the rounded factor copy is listed with the preconditioner's bytes (4
+    // per factor entry), and its blocks take 81 floats instead of 81 doubles
     double bytes = 0.0;
     for (const auto& [name, b] : emu.structures())
       if (name == "constant Schur preconditioner") bytes = b;
-    CHECK(bytes > 0.0);
-    if (single) CHECK(bytes >= 4.0 * emu.factor_nnz());
+    const double blocks = double(m.tets.rows()) * 81.0 * (single ? 4.0 : 8.0);
+    CHECK_CLOSE(bytes, blocks + (single ? 4.0 * emu.factor_nnz() : 0.0), 1e-9 * bytes);
   }
   CHECK((r[1].positions - r[0].positions).rowwise().norm().maxCoeff() <= 1e-6 * diag);
   CHECK(r[1].cg_iterations <= 1.15 * r[0].cg_iterations + 2 && r[0].cg_iterations <= 1.15 * r[1].cg_iterations + 2);

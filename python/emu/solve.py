@@ -243,10 +243,12 @@ class Solver:
                   correction (default 4; 0: off. At the strict tolerance 4 cut
                   realistic_biceps from 6,754 to 3,056 CG iterations and the
                   bone scenes' total time by 40%, docs/DESIGN.md)
-    single_precision_s0  EMU, preconditioner "constant-schur": its S0 solves (one per CG
-                  iteration) with the factor rounded to float, half the bytes streamed (a
-                  fixed SPD preconditioner still: CG's path changes, not the answer;
-                  docs/DESIGN.md, "The cost of an iteration")
+    single_precision_preconditioner  EMU, preconditioner "constant-schur": its S0 solves
+                  (one per CG iteration) with the factor rounded to float and its 9x9 block
+                  inverses kept in float, half the bytes streamed (a fixed SPD
+                  preconditioner still: CG's path changes, not the answer; docs/DESIGN.md,
+                  "The cost of an iteration"). single_precision_s0, its name in 0.1.0
+                  development, is accepted with a DeprecationWarning
     threads       OpenMP and OpenBLAS threads (None: leave as is)
     error_estimate  EMU: estimate every solve's error to FEM (Solution.error_estimate;
                   one or two sparse factorisations of the FEM Hessian per
@@ -293,7 +295,8 @@ class Solver:
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
                  lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8,
                  eigen_filter: str = "clamp", negative_curvature: bool = True, fem_correction: bool | None = None,
-                 step_fraction: float = STEP_FRACTION, single_precision_s0: bool = True):
+                 step_fraction: float = STEP_FRACTION, single_precision_preconditioner: bool = True,
+                 single_precision_s0: bool | None = None):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
@@ -410,10 +413,14 @@ class Solver:
             if int(lbfgs_memory) < 1:
                 raise ValueError(f"lbfgs_memory must be >= 1, got {lbfgs_memory}")
             eo.lbfgs_memory = int(lbfgs_memory)
-            eo.single_precision_s0 = bool(single_precision_s0)
+            if single_precision_s0 is not None:
+                warnings.warn("single_precision_s0 is now single_precision_preconditioner (it rounds the "
+                              "block inverses too); use that name", DeprecationWarning, stacklevel=2)
+                single_precision_preconditioner = single_precision_s0
+            eo.single_precision_preconditioner = bool(single_precision_preconditioner)
             self._core = _core.EmuSolver(self.model, opts, eo)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
-                                 single_precision_s0=eo.single_precision_s0,
+                                 single_precision_preconditioner=eo.single_precision_preconditioner,
                                  preconditioner=preconditioner if step == "newton-krylov" else None,
                                  cg_model_decrease=eo.cg_model_decrease if step == "newton-krylov" else None,
                                  cg_forcing_min=eo.cg_forcing_min if step == "newton-krylov" else None)

@@ -26,8 +26,9 @@ Eigen::VectorXd ConstantSchur::weights(const Model& model, const UnknownLayout& 
 
 ConstantSchur::ConstantSchur(const Model& model, const UnknownLayout& layout, AcapOperator& acap, double alpha,
                              bool single_precision)
-    : model_(model), layout_(layout), acap_(acap), single_precision_(single_precision), alpha_(-1.0),
-      Ainv_(layout.num_unknowns) {
+    : model_(model), layout_(layout), acap_(acap), single_precision_(single_precision), alpha_(-1.0) {
+  if (single_precision_) Ainv_rounded_.resize(layout.num_unknowns);
+  else Ainv_.resize(layout.num_unknowns);
   set_alpha(alpha);
 }
 
@@ -62,10 +63,14 @@ bool ConstantSchur::update(const std::vector<Mat9>& A) {
   int bad = 0;
 #pragma omp parallel for schedule(static) reduction(+ : bad)
   for (long u = 0; u < n; ++u) {
-    if (!spd_inverse<9>(A[u], Ainv_[u])) {
+    Mat9 inv;
+    const bool spd = spd_inverse<9>(A[u], inv);
+    if (!spd) {
       ++bad;
-      Ainv_[u].setZero();
+      inv.setZero();
     }
+    if (single_precision_) round_spd_block(inv, Ainv_rounded_[u]);
+    else Ainv_[u] = inv;
   }
   ok_ = bad == 0;
   return ok_;
@@ -78,13 +83,14 @@ void ConstantSchur::apply(const Mat9X& r, Mat9X& out) const {
   }
   // A^-1 r + alpha A^-1 C^T S0^-1 C (A^-1 r): C with the ACAP weights, S0 with
   // its own (S0^-1 = (scale_ K)^-1 without an own factor)
-  apply_schur_form(layout_, acap_, Ainv_, alpha_ / scale_, r, out, work_,
-                   [&](const Eigen::MatrixX3d& y, Eigen::MatrixX3d& u) {
-                     rhs_ = y;
-                     if (rounded_ && !s0_) acap_.solve_rounded(rhs_, z_);
-                     else s0().solve(rhs_, z_);  // s0_: rounded where built so
-                     u = z_;
-                   });
+  auto middle = [&](const Eigen::MatrixX3d& y, Eigen::MatrixX3d& u) {
+    rhs_ = y;
+    if (rounded_ && !s0_) acap_.solve_rounded(rhs_, z_);
+    else s0().solve(rhs_, z_);  // s0_: rounded where built so
+    u = z_;
+  };
+  if (single_precision_) apply_schur_form(layout_, acap_, Ainv_rounded_, alpha_ / scale_, r, out, work_, middle);
+  else apply_schur_form(layout_, acap_, Ainv_, alpha_ / scale_, r, out, work_, middle);
 }
 
 }  // namespace emu

@@ -38,9 +38,10 @@ namespace emu {
 
 class ConstantSchur {
  public:
-  /// single_precision: S0's solves with its factor rounded to float
-  /// (EmuOptions::single_precision_s0): S0's own factor, or, where S0 = c K
-  /// on a scene without movable bones, a rounded copy of acap's.
+  /// single_precision (EmuOptions::single_precision_preconditioner): S0's
+  /// solves with its factor rounded to float (S0's own factor, or, where
+  /// S0 = c K on a scene without movable bones, a rounded copy of acap's), and
+  /// the block inverses kept rounded (round_spd_block: definite, >= A^-1).
   ConstantSchur(const Model& model, const UnknownLayout& layout, AcapOperator& acap, double alpha,
                 bool single_precision = true);
 
@@ -62,7 +63,8 @@ class ConstantSchur {
   double factor_nnz() const { return s0_ ? s0_->factor().factor_nnz() : 0.0; }
   /// Bytes held: S0's own factor (if any) and the block inverses.
   double bytes() const {
-    return 8.0 * factor_nnz() + (rounded_ ? 4.0 * s0().factor().factor_nnz() : 0.0) + sizeof(Mat9) * double(Ainv_.size());
+    return 8.0 * factor_nnz() + (rounded_ ? 4.0 * s0().factor().factor_nnz() : 0.0) + sizeof(Mat9) * double(Ainv_.size()) +
+           sizeof(Mat9f) * double(Ainv_rounded_.size());
   }
 
  private:
@@ -74,7 +76,8 @@ class ConstantSchur {
   double alpha_;
   std::unique_ptr<AcapOperator> s0_;  // empty where S0 = scale_ K (K's factor serves)
   double scale_ = 1.0;
-  std::vector<Mat9> Ainv_;
+  std::vector<Mat9> Ainv_;          // the block inverses in double, or
+  std::vector<Mat9f> Ainv_rounded_;  // rounded (single_precision; round_spd_block)
   bool ok_ = false;
   // apply()'s work arrays, kept between calls
   mutable SchurFormWork work_;

@@ -71,7 +71,7 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   }
   if (constant_schur) {
     t0 = Clock::now();
-    constant_schur_ = std::make_unique<ConstantSchur>(model_, layout_, *acap_, emu_.alpha, emu_.single_precision_s0);
+    constant_schur_ = std::make_unique<ConstantSchur>(model_, layout_, *acap_, emu_.alpha, emu_.single_precision_preconditioner);
     factor_seconds_ += seconds_since(t0);
   }
   tet_energy_.resize(model_.tets.rows());

@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 
 #include "emu/energy/types.h"
+#include "emu/linalg/rounded_block.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
 
@@ -27,15 +28,16 @@ struct SchurFormWork {
 };
 
 /// out = A^-1 r + s A^-1 C^T middle(C A^-1 r). r, out: 9 x #unknowns; Ainv:
-/// #unknowns blocks; middle(y, u): u = P y (y, u #dofs by 3). With
-/// blocks_only, out = A^-1 r (the middle term left out).
-template <class Middle>
-void apply_schur_form(const UnknownLayout& layout, const AcapOperator& acap, const std::vector<Mat9>& Ainv, double s,
+/// #unknowns blocks (Mat9, or Mat9f rounded by round_spd_block); middle(y, u):
+/// u = P y (y, u #dofs by 3). With blocks_only, out = A^-1 r (the middle term
+/// left out).
+template <class Block, class Middle>
+void apply_schur_form(const UnknownLayout& layout, const AcapOperator& acap, const std::vector<Block>& Ainv, double s,
                       const Mat9X& r, Mat9X& out, SchurFormWork& w, Middle&& middle, bool blocks_only = false) {
   const long n = r.cols();
   out.resize(9, n);
 #pragma omp parallel for schedule(static)
-  for (long u = 0; u < n; ++u) out.col(u).noalias() = Ainv[u].lazyProduct(r.col(u));
+  for (long u = 0; u < n; ++u) out.col(u) = block_times(Ainv[u], r.col(u));
   if (blocks_only) return;
   acap.apply_C_of_unknowns(out, w.y);
   middle(w.y, w.u);
@@ -46,7 +48,7 @@ void apply_schur_form(const UnknownLayout& layout, const AcapOperator& acap, con
     ct = &w.per_unknown;
   }
 #pragma omp parallel for schedule(static)
-  for (long u = 0; u < n; ++u) out.col(u).noalias() += s * Ainv[u].lazyProduct(ct->col(u));
+  for (long u = 0; u < n; ++u) out.col(u) += s * block_times(Ainv[u], ct->col(u));
 }
 
 }  // namespace emu

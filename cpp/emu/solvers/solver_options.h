@@ -92,11 +92,12 @@ struct EmuOptions {
   // Movable bones: directions of CG solves far longer than the last one kept
   // in the coarse space of later steps, at most this many (0: off)
   int recycled_directions = 4;
-  // ConstantSchur: S0's solves (one per CG iteration) with its factor rounded
-  // to single precision: half the bytes of a back-substitution that streams
-  // the whole factor (docs/DESIGN.md, "The cost of an iteration"); the
-  // preconditioner stays one fixed SPD matrix
-  bool single_precision_s0 = true;
+  // ConstantSchur in single precision: S0's solves (one per CG iteration) with
+  // its factor rounded to float, and the 9x9 block inverses rounded
+  // (round_spd_block): half the bytes of a back-substitution that streams the
+  // whole factor and of the two block passes (docs/DESIGN.md, "The cost of an
+  // iteration"); the preconditioner stays one fixed SPD matrix
+  bool single_precision_preconditioner = true;
   int lbfgs_memory = 8;  // EmuStep::Lbfgs: the (s, y) pairs kept
 };
 
