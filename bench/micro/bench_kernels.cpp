@@ -160,9 +160,30 @@ void block_inverse(benchmark::State& state, bool own) {
   state.SetItemsProcessed(state.iterations() * kElements);
 }
 
+// invert_spd_blocks: four blocks side by side per spd_inverse_lanes call (the
+// same bits as spd_inverse), as ConstantSchur::update inverts them.
+void block_inverse_lanes(benchmark::State& state) {
+  const auto Fs = random_gradients(kElements, 0.3);
+  const TetMaterial m{kMu, kLambda, 3e4, Vec3(0.0, 0.0, 1.0)};
+  std::vector<Mat9> A(kElements), inv(kElements);
+  for (int e = 0; e < kElements; ++e) {
+    Mat9 H_psd;
+    material_hessians(m, Fs[e], EigenFilter::Clamp, &H_psd, nullptr);
+    A[e] = H_psd;
+    A[e].diagonal().array() += 100.0 * kMu;
+  }
+  for (auto _ : state) {
+    invert_spd_blocks<9>(A, [&](long u, const Mat9& B, bool) { inv[u] = B; });
+    benchmark::DoNotOptimize(inv.data());
+    benchmark::ClobberMemory();
+  }
+  state.SetItemsProcessed(state.iterations() * kElements);
+}
+
 BENCHMARK(element_energy_gradient_hessian);
 BENCHMARK_CAPTURE(block_inverse, eigen_llt, false);
 BENCHMARK_CAPTURE(block_inverse, spd_inverse, true);
+BENCHMARK(block_inverse_lanes);
 BENCHMARK_CAPTURE(projection, numerical, false)->Arg(1)->Arg(30);
 BENCHMARK_CAPTURE(projection, closed_form, true)->Arg(1)->Arg(30);
 BENCHMARK(block_products)->ArgsProduct({{0, 1}, {20000, 2000}});

@@ -404,6 +404,37 @@ TEST(round_spd_block_stays_definite_and_above_the_exact_block) {
   CHECK(plain_indefinite > 0);  // the shift is needed: a plain cast loses definiteness at condition 1e10
 }
 
+// spd_inverse_lanes and invert_spd_blocks give spd_inverse's bits block by
+// block (13 blocks: three groups of four and one left over), and flag the
+// blocks that are not positive definite without disturbing the others.
+TEST(spd_inverse_lanes_give_the_same_bits_and_flag_indefinite_blocks) {
+  std::mt19937 rng(11);
+  std::normal_distribution<double> g(0.0, 1.0);
+  using Mat9d = Eigen::Matrix<double, 9, 9>;
+  std::vector<Mat9d> A(13);
+  for (Mat9d& B : A) {
+    Mat9d M;
+    for (int i = 0; i < 81; ++i) M.data()[i] = g(rng);
+    B = M * M.transpose() + 0.1 * Mat9d::Identity();
+  }
+  A[2](4, 4) = -1.0;             // indefinite, in a group of four
+  A[7](0, 0) = std::nan("");     // not finite
+  A[12] = -Mat9d::Identity();    // the left-over block
+  std::vector<Mat9d> inv(A.size());
+  std::vector<int> ok(A.size(), -1);
+  invert_spd_blocks<9>(A, [&](long u, const Mat9d& B, bool good) {
+    inv[u] = B;
+    ok[u] = good;
+  });
+  for (size_t u = 0; u < A.size(); ++u) {
+    Mat9d ref;
+    const bool good = spd_inverse<9>(A[u], ref);
+    CHECK(ok[u] == int(good));
+    if (good) CHECK(inv[u] == ref);  // bit for bit
+  }
+  CHECK(ok[2] == 0 && ok[7] == 0 && ok[12] == 0 && ok[0] == 1 && ok[11] == 1);
+}
+
 TEST(spd_inverse_matches_the_dense_inverse_and_refuses_indefinite_blocks) {
   // 9x9 SPD blocks from well conditioned to condition 1e6 (an ACAP term
   // alpha w V beside a soft material's curvature), against a dense LU inverse.

@@ -8,6 +8,7 @@
 // triangular-solve kernels at this size (docs/DESIGN.md, "The cost of an
 // iteration": measured in bench/micro/bench_kernels).
 #include <cmath>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -46,6 +47,87 @@ bool spd_inverse(const Eigen::Matrix<double, N, N>& A, Eigen::Matrix<double, N, 
   for (int i = 0; i < N; ++i)
     for (int c = 0; c < N; ++c) inv(i, c) = out[i][c];
   return true;
+}
+
+/// The inverses of L blocks at once: lane l of every operation works on
+/// block l. The nine pivots' square roots and divisions form one chain of
+/// dependent operations per block; L blocks side by side fill the vector
+/// lanes and overlap those latencies, and with the lanes innermost the loops
+/// can stop where the triangles end (a third of spd_inverse's multiply-adds:
+/// the lower triangle of the trailing update, W = L^-1 lower triangular, one
+/// triangle of W^T W mirrored). Each entry sums the same nonzero terms in the
+/// same order as spd_inverse, which only adds exact zeros besides: the same
+/// bits (tested). ok[l]: block l was positive definite (else inv[l] is
+/// unspecified). A, inv: L blocks each (docs/DESIGN.md, "The cost of an
+/// iteration": bench_kernels block_inverse).
+template <int N, int L>
+void spd_inverse_lanes(const Eigen::Matrix<double, N, N>* A, Eigen::Matrix<double, N, N>* inv, bool* ok) {
+  double a[N][N][L], Lf[N][N][L], W[N][N][L], rinv[N][L];
+  bool good[L];
+  for (int l = 0; l < L; ++l) good[l] = true;
+  for (int i = 0; i < N; ++i)
+    for (int k = 0; k <= i; ++k)
+      for (int l = 0; l < L; ++l) a[i][k][l] = A[l](i, k);
+  for (int j = 0; j < N; ++j) {  // right-looking: column j of L, then the trailing lower triangle
+    for (int l = 0; l < L; ++l) {
+      const double d = a[j][j][l];
+      good[l] = good[l] && d > 0 && std::isfinite(d);
+      const double r = std::sqrt(good[l] ? d : 1.0);  // a failed lane goes on with 1: no NaN, no trap
+      rinv[j][l] = 1.0 / r;
+      Lf[j][j][l] = r;
+    }
+    for (int i = j + 1; i < N; ++i)
+      for (int l = 0; l < L; ++l) Lf[i][j][l] = a[i][j][l] * rinv[j][l];
+    for (int i = j + 1; i < N; ++i)
+      for (int k = j + 1; k <= i; ++k)
+        for (int l = 0; l < L; ++l) a[i][k][l] -= Lf[i][j][l] * Lf[k][j][l];
+  }
+  for (int i = 0; i < N; ++i) {  // row i of W = L^-1 (columns c <= i)
+    double row[N][L];
+    for (int c = 0; c <= i; ++c)
+      for (int l = 0; l < L; ++l) row[c][l] = c == i ? 1.0 : 0.0;
+    for (int k = 0; k < i; ++k)
+      for (int c = 0; c <= k; ++c)
+        for (int l = 0; l < L; ++l) row[c][l] -= Lf[i][k][l] * W[k][c][l];
+    for (int c = 0; c <= i; ++c)
+      for (int l = 0; l < L; ++l) W[i][c][l] = row[c][l] * rinv[i][l];
+  }
+  double out[N][N][L];  // lower triangle: out[i][c] = sum_{k >= i} W[k][i] W[k][c], c <= i
+  for (int i = 0; i < N; ++i)
+    for (int c = 0; c <= i; ++c)
+      for (int l = 0; l < L; ++l) out[i][c][l] = 0.0;
+  for (int k = 0; k < N; ++k)
+    for (int i = 0; i <= k; ++i)
+      for (int c = 0; c <= i; ++c)
+        for (int l = 0; l < L; ++l) out[i][c][l] += W[k][i][l] * W[k][c][l];
+  for (int l = 0; l < L; ++l) {
+    ok[l] = good[l];
+    for (int i = 0; i < N; ++i)
+      for (int c = 0; c <= i; ++c) inv[l](i, c) = inv[l](c, i) = out[i][c][l];
+  }
+}
+
+/// store(u, inv, ok) for every block u of A (#blocks N x N, SPD expected):
+/// inv = A[u]^-1 where ok. Four blocks per spd_inverse_lanes call, in
+/// parallel (store runs inside the parallel loop: it must not throw), the
+/// last partial group one by one. The same bits as spd_inverse per block.
+template <int N, class Store>
+void invert_spd_blocks(const std::vector<Eigen::Matrix<double, N, N>>& A, Store&& store) {
+  using Block = Eigen::Matrix<double, N, N>;
+  constexpr long kLanes = 4;
+  const long n = static_cast<long>(A.size()), groups = n / kLanes;
+#pragma omp parallel for schedule(static)
+  for (long g = 0; g < groups; ++g) {
+    Block inv[kLanes];
+    bool ok[kLanes];
+    spd_inverse_lanes<N, kLanes>(A.data() + g * kLanes, inv, ok);
+    for (long l = 0; l < kLanes; ++l) store(g * kLanes + l, inv[l], ok[l]);
+  }
+  for (long u = groups * kLanes; u < n; ++u) {
+    Block inv;
+    const bool ok = spd_inverse<N>(A[u], inv);
+    store(u, inv, ok);
+  }
 }
 
 }  // namespace emu

@@ -59,20 +59,14 @@ void ConstantSchur::set_alpha(double alpha) {
 }
 
 bool ConstantSchur::update(const std::vector<Mat9>& A) {
-  const long n = static_cast<long>(A.size());
-  int bad = 0;
-#pragma omp parallel for schedule(static) reduction(+ : bad)
-  for (long u = 0; u < n; ++u) {
-    Mat9 inv;
-    const bool spd = spd_inverse<9>(A[u], inv);
-    if (!spd) {
-      ++bad;
-      inv.setZero();
-    }
-    if (single_precision_) round_spd_block(inv, Ainv_rounded_[u]);
-    else Ainv_[u] = inv;
-  }
-  ok_ = bad == 0;
+  std::vector<char> bad(A.size(), 0);  // per block: the flags are written inside the parallel loop
+  invert_spd_blocks<9>(A, [&](long u, const Mat9& inv, bool ok) {
+    const Mat9 B = ok ? inv : Mat9::Zero();
+    bad[u] = !ok;
+    if (single_precision_) round_spd_block(B, Ainv_rounded_[u]);
+    else Ainv_[u] = B;
+  });
+  ok_ = std::find(bad.begin(), bad.end(), 1) == bad.end();
   return ok_;
 }
 
