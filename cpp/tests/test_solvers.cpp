@@ -6,6 +6,7 @@
 #include "bar_model.h"
 #include "check.h"
 #include "emu/mesh/block_pattern.h"
+#include "emu/solvers/bone_coarse_space.h"
 #include "emu/solvers/emu_solver.h"
 #include "emu/solvers/fem_solver.h"
 
@@ -252,6 +253,74 @@ TEST(acap_single_precision_operator_with_bones_stays_symmetric) {
   const double uKv = (u.array() * Kv.array()).sum(), vKu = (v.array() * Ku.array()).sum();
   CHECK(std::abs(uKv - vKu) <= 1e-11 * Ku.norm() * v.norm());
   CHECK((Ku - Ke).norm() <= 1e-4 * Ke.norm() && (Ku - Ke).norm() > 0.0);
+}
+
+// The bone coarse space never stores Z's turn columns: it takes Z^T r and
+// Z c from the bones' shared follow fields (turn k of bone b is M_bk Phi_b).
+// Against the dense balancing form M^-1 = Q + (I - Q H) B (I - H Q), Q =
+// Z (Z^T H Z)^-1 Z^T, with Z's columns as turn() returned them, a random SPD
+// H, a recycled direction and B = I (base: a copy); and the additive form
+// Q + B where Z^T H Z is singular (a recycled direction equal to a turn).
+TEST(bone_coarse_space_matches_the_dense_balancing_preconditioner) {
+  int soft_rigid = -1;
+  const Model m = bar_with_two_bones(soft_rigid);
+  const UnknownLayout layout(m);
+  const int ns = layout.num_soft, nu = layout.num_unknowns, nb = layout.num_bones, n = 9 * nu;
+  CHECK(nb == 2);
+  std::mt19937 rng(8);
+  std::normal_distribution<double> g(0, 1);
+  std::vector<Mat9X> follow(nb, Mat9X(9, ns));
+  for (Mat9X& f : follow)
+    for (Eigen::Index i = 0; i < f.size(); ++i) f.data()[i] = g(rng);
+  Eigen::MatrixXd G(n, n);
+  for (Eigen::Index i = 0; i < G.size(); ++i) G.data()[i] = g(rng);
+  const Eigen::MatrixXd H = G * G.transpose() / n + Eigen::MatrixXd::Identity(n, n);
+  auto flat = [](const Mat9X& v) { return Eigen::Map<const Eigen::VectorXd>(v.data(), v.size()); };
+  auto hprod = [&](const Mat9X& v, Mat9X& out) {
+    out.resize(9, v.cols());
+    Eigen::Map<Eigen::VectorXd>(out.data(), out.size()) = H * flat(v);
+  };
+  Mat9X F = Mat9X::Zero(9, nu);
+  for (int b = 0; b < nb; ++b)
+    F.col(ns + b) = flatten(Eigen::AngleAxisd(0.3 + b, Vec3(1, 2, 3 - b).normalized()).toRotationMatrix());
+  std::vector<Mat9X> turns;
+  auto turn = [&](int b, const Mat3& M, Mat9X& Z, Mat9X& HZ) {
+    Z = Mat9X::Zero(9, nu);
+    for (int u = 0; u < ns; ++u) Z.col(u) = flatten(Mat3(M * unflatten(follow[b].col(u))));
+    Z.col(ns + b) = flatten(M);
+    hprod(Z, HZ);
+    turns.push_back(Z);
+  };
+  Mat9X extra(9, nu), r(9, nu);
+  for (Eigen::Index i = 0; i < extra.size(); ++i) extra.data()[i] = g(rng);
+  for (Eigen::Index i = 0; i < r.size(); ++i) r.data()[i] = g(rng);
+  auto base = [](const Mat9X& in, Mat9X& out) { out = in; };
+  for (int deficient : {0, 1}) {
+    BoneCoarseSpace coarse(layout, 1.0, {&follow[0], &follow[1]});
+    turns.clear();
+    coarse.build(F, turn, hprod, {extra});
+    CHECK(static_cast<int>(turns.size()) == 3 * nb);
+    Eigen::MatrixXd Z(n, 3 * nb + 1);
+    for (int j = 0; j < 3 * nb; ++j) Z.col(j) = flat(turns[j]);
+    Z.col(3 * nb) = flat(extra);
+    if (deficient) {  // a recycled direction equal to a turn: Z^T H Z singular, the additive form
+      coarse.build(F, turn, hprod, {turns[1]});
+      for (int j = 0; j < 3 * nb; ++j) Z.col(j) = flat(turns[3 * nb + j]);
+      Z.col(3 * nb) = Z.col(1);
+    }
+    const Eigen::MatrixXd E = Z.transpose() * H * Z;
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(E);
+    Eigen::MatrixXd Einv = Eigen::MatrixXd::Zero(E.rows(), E.cols());
+    for (int i = 0; i < E.rows(); ++i)
+      if (es.eigenvalues()(i) > 1e-9 * es.eigenvalues().maxCoeff())
+        Einv += es.eigenvectors().col(i) * es.eigenvectors().col(i).transpose() / es.eigenvalues()(i);
+    const Eigen::MatrixXd Q = Z * Einv * Z.transpose(), I = Eigen::MatrixXd::Identity(n, n);
+    const Eigen::MatrixXd Minv = deficient ? Eigen::MatrixXd(Q + I) : Eigen::MatrixXd(Q + (I - Q * H) * (I - H * Q));
+    Mat9X out;
+    coarse.apply(r, out, base);
+    const Eigen::VectorXd want = Minv * flat(r);
+    CHECK((flat(out) - want).norm() <= 1e-10 * want.norm());
+  }
 }
 
 TEST_MAIN()

@@ -2,23 +2,30 @@
 
 #include <algorithm>
 #include <limits>
+#include <stdexcept>
+#include <utility>
 
 #include <Eigen/Eigenvalues>
 
 namespace emu {
 
-BoneCoarseSpace::BoneCoarseSpace(const UnknownLayout& layout, double alpha) : layout_(layout), alpha_(alpha) {}
+BoneCoarseSpace::BoneCoarseSpace(const UnknownLayout& layout, double alpha, std::vector<const Mat9X*> follow)
+    : layout_(layout), alpha_(alpha), follow_(std::move(follow)) {}
 
 void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& product,
                             const std::vector<Mat9X>& extra) {
   const int nb = layout_.num_bones, nu = layout_.num_unknowns, nz = 3 * nb + static_cast<int>(extra.size());
+  if (static_cast<int>(follow_.size()) != nb)
+    throw std::logic_error("BoneCoarseSpace: one follow field per movable bone expected");
   std::vector<Mat9X> Z(nz), HZ(nz);
+  turn_.resize(3 * nb);
   for (int b = 0; b < nb; ++b)
     for (int k = 0; k < 3; ++k) {
       Mat3 W = Mat3::Zero();  // [e_k]_x
       W((k + 2) % 3, (k + 1) % 3) = 1.0;
       W((k + 1) % 3, (k + 2) % 3) = -1.0;
-      turn(b, Mat3(W * unflatten(F.col(layout_.num_soft + b))), Z[3 * b + k], HZ[3 * b + k]);
+      turn_[3 * b + k] = W * unflatten(F.col(layout_.num_soft + b));
+      turn(b, turn_[3 * b + k], Z[3 * b + k], HZ[3 * b + k]);
     }
   for (size_t e = 0; e < extra.size(); ++e) {
     Z[3 * nb + e] = extra[e];
@@ -28,12 +35,10 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
   for (int j = 0; j < nz; ++j)
     for (int i = 0; i < nz; ++i) E(i, j) = dot(Z[i], HZ[j]);
   const Eigen::Index entries = 9 * static_cast<Eigen::Index>(nu);
-  Z_.resize(entries, nz);
   HZ_.resize(entries, nz);
-  for (int j = 0; j < nz; ++j) {
-    Z_.col(j) = flat(Z[j]);
-    HZ_.col(j) = flat(HZ[j]);
-  }
+  for (int j = 0; j < nz; ++j) HZ_.col(j) = flat(HZ[j]);
+  Zx_.resize(entries, nz - 3 * nb);  // the recycled directions; the turns are M_bk Phi_b
+  for (int j = 3 * nb; j < nz; ++j) Zx_.col(j - 3 * nb) = flat(Z[j]);
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (E + E.transpose()));
   double scale = std::numeric_limits<double>::infinity();
   for (int u = layout_.num_soft; u < nu; ++u) {
@@ -83,6 +88,61 @@ void BoneCoarseSpace::combine(const Mat9X& a, double s, const Eigen::MatrixXd& M
     const Eigen::Index lo = n * k / kSumChunks, hi = n * (k + 1) / kSumChunks;
     if (&out != &a) y.segment(lo, hi - lo) = x.segment(lo, hi - lo);
     y.segment(lo, hi - lo).noalias() += s * (M.middleRows(lo, hi - lo) * c);
+  }
+}
+
+void BoneCoarseSpace::project_Z(const Mat9X& v, Eigen::VectorXd& c) const {
+  const int nb = layout_.num_bones, ns = layout_.num_soft, nx = static_cast<int>(Zx_.cols());
+  Eigen::VectorXd sums;
+  // sums: G_b column-major in 9 b .. 9 b + 8, then the recycled columns' dots
+  chunked_sum_into(
+      layout_.num_unknowns, 9 * nb + nx,
+      [&](Eigen::Index lo, Eigen::Index hi, auto& part) {
+        part.setZero();
+        for (Eigen::Index u = lo; u < hi; ++u) {
+          const double* r = v.col(u).data();  // R(i, l) = r[i + 3 l]
+          if (u < ns) {
+            for (int b = 0; b < nb; ++b) {  // G_b += R Phi^T: G(i, j) = sum_l R(i, l) Phi(j, l)
+              const double* f = follow_[b]->col(u).data();
+              for (int j = 0; j < 3; ++j)
+                for (int i = 0; i < 3; ++i)
+                  part(9 * b + i + 3 * j) += r[i] * f[j] + r[i + 3] * f[j + 3] + r[i + 6] * f[j + 6];
+            }
+          } else {  // bone b's own unknown: Phi = I
+            const int b = static_cast<int>(u - ns);
+            for (int q = 0; q < 9; ++q) part(9 * b + q) += r[q];
+          }
+          for (int e = 0; e < nx; ++e) part(9 * nb + e) += Zx_.col(e).segment<9>(9 * u).dot(Eigen::Map<const Vec9>(r));
+        }
+      },
+      parts_, sums);
+  c.resize(3 * nb + nx);
+  for (int b = 0; b < nb; ++b)
+    for (int k = 0; k < 3; ++k)
+      c(3 * b + k) = (turn_[3 * b + k].array() * Eigen::Map<const Mat3>(sums.data() + 9 * b).array()).sum();
+  c.tail(nx) = sums.tail(nx);
+}
+
+void BoneCoarseSpace::combine_Z(const Mat9X& a, double s, const Eigen::VectorXd& c, Mat9X& out) const {
+  const int nb = layout_.num_bones, ns = layout_.num_soft, nu = layout_.num_unknowns;
+  const int nx = static_cast<int>(Zx_.cols());
+  if (&out != &a) out.resize(a.rows(), a.cols());
+  combined_.resize(nb);
+  for (int b = 0; b < nb; ++b) {  // N_b = s sum_k c_bk M_bk
+    combined_[b].setZero();
+    for (int k = 0; k < 3; ++k) combined_[b] += c(3 * b + k) * turn_[3 * b + k];
+    combined_[b] *= s;
+  }
+#pragma omp parallel for schedule(static)
+  for (int u = 0; u < nu; ++u) {
+    Vec9 add = Vec9::Zero();
+    if (u < ns) {
+      for (int b = 0; b < nb; ++b) add += flatten(Mat3(combined_[b] * unflatten(follow_[b]->col(u))));
+    } else {
+      add = flatten(combined_[u - ns]);
+    }
+    for (int e = 0; e < nx; ++e) add += (s * c(3 * nb + e)) * Zx_.col(e).segment<9>(9 * static_cast<Eigen::Index>(u));
+    out.col(u) = a.col(u) + add;
   }
 }
 

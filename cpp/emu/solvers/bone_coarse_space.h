@@ -13,6 +13,13 @@
 // step with the Hessian CG uses (3 Hessian products per bone, their fits
 // from the unit turn's: no back-substitution without contact; H Z is kept, so an application
 // costs one B and 4 x 3 vector operations per bone).
+// A bone's three turns share one field: turn k of bone b is M_bk Phi_b
+// (M_bk = [e_k]_x F_b; Phi_b: the unit turn's F_t on the soft unknowns,
+// `follow`, the identity on b's own unknown, zero on the other bones), so Z
+// itself is not stored: Z^T r takes G_b = sum_u R_u Phi_b,u^T (3x3) and
+// c_bk = <M_bk, G_b>, and Z c adds (sum_k c_bk M_bk) Phi_b,u: a pass over
+// Phi_b in place of three over Z's columns (the recycled directions, which
+// have no such form, stay columns).
 // Where Z^T H Z is not positive definite (negative curvature far from
 // equilibrium, or a neutral mode) the additive form Q + B with the positive
 // part of Z^T H Z is used. A direction of zero curvature, measured against the
@@ -38,7 +45,10 @@ class BoneCoarseSpace {
   /// HZ = H Z (EmuSolver::bone_turn_into: from the unit turn's fits).
   using Turn = std::function<void(int, const Mat3&, Mat9X&, Mat9X&)>;
 
-  BoneCoarseSpace(const UnknownLayout& layout, double alpha);
+  /// follow: per movable bone, Phi_b on the soft unknowns (9 x #soft; the
+  /// unit turn's F_t), which every turn(b, M, ...) of build must follow: Z =
+  /// M Phi_b (above). Kept by pointer: it must outlive the coarse space.
+  BoneCoarseSpace(const UnknownLayout& layout, double alpha, std::vector<const Mat9X*> follow);
 
   /// Rebuild at F (9 x #unknowns; bone columns rotations) with H's product;
   /// `extra` directions (9 x #unknowns each, bone columns tangent at F: the
@@ -63,18 +73,27 @@ class BoneCoarseSpace {
   void project(const Eigen::MatrixXd& M, const Mat9X& v, Eigen::VectorXd& c) const;
   /// out = a + s M c over the entries (a may be out), in parallel.
   static void combine(const Mat9X& a, double s, const Eigen::MatrixXd& M, const Eigen::VectorXd& c, Mat9X& out);
+  /// c = Z^T v from the turns' shared fields and the recycled columns
+  /// (the same fixed chunks over the unknowns: thread-count independent).
+  void project_Z(const Mat9X& v, Eigen::VectorXd& c) const;
+  /// out = a + s Z c (a may be out), in parallel.
+  void combine_Z(const Mat9X& a, double s, const Eigen::VectorXd& c, Mat9X& out) const;
 
   const UnknownLayout& layout_;
   double alpha_;
-  // Z and H Z, one column per coarse direction (vec of its 9 x #unknowns
-  // array): an application streams each once per use, not once per column.
-  Eigen::MatrixXd Z_, HZ_;
+  std::vector<const Mat9X*> follow_;  // Phi_b on the soft unknowns, per bone
+  std::vector<Mat3> turn_;            // M_bk, column 3 b + k of Z
+  // H Z, one column per coarse direction (vec of its 9 x #unknowns array),
+  // and the recycled directions' columns of Z (after the 3 #bones turns): an
+  // application streams each once per use, not once per column.
+  Eigen::MatrixXd HZ_, Zx_;
   Eigen::MatrixXd inv_;  // pseudo-inverse of Z^T H Z
   bool built_ = false, balancing_ = false;
   std::vector<NeutralMode> neutral_;
   mutable Mat9X r1_;
   mutable Eigen::MatrixXd parts_;  // nz by kSumChunks partial projections
   mutable Eigen::VectorXd c1_, c2_;
+  mutable std::vector<Mat3> combined_;  // sum_k c_bk M_bk per bone (combine_Z)
 };
 
 template <class Base>
@@ -84,19 +103,19 @@ void BoneCoarseSpace::apply(const Mat9X& in, Mat9X& out, Base&& base) const {
     return;
   }
   if (balancing_) {
-    project(Z_, in, c2_);
+    project_Z(in, c2_);
     c1_.noalias() = inv_ * c2_;  // c1 = (Z^T H Z)^-1 Z^T r
     combine(in, -1.0, HZ_, c1_, r1_);  // r1 = r - H Z c1
     base(r1_, out);
     project(HZ_, out, c2_);
     c1_.noalias() -= inv_ * c2_;  // c1 - c2, c2 = (Z^T H Z)^-1 (H Z)^T B r1
-    combine(out, 1.0, Z_, c1_, out);
+    combine_Z(out, 1.0, c1_, out);
     return;
   }
   base(in, out);
-  project(Z_, in, c2_);
+  project_Z(in, c2_);
   c1_.noalias() = inv_ * c2_;
-  combine(out, 1.0, Z_, c1_, out);
+  combine_Z(out, 1.0, c1_, out);
 }
 
 }  // namespace emu

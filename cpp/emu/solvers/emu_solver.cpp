@@ -107,10 +107,11 @@ std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
   if (schur_) out.emplace_back("Schur preconditioner", schur_->bytes());
   if (constant_schur_) out.emplace_back("constant Schur preconditioner", constant_schur_->bytes());
   if (layout_.num_bones && emu_.bone_coarse_space) {
-    // Z and H Z: 3 turns per bone and the recycled directions (at most) over
-    // all unknowns, rebuilt every Newton step
-    const double vectors = 3.0 * layout_.num_bones + emu_.recycled_directions;
-    out.emplace_back("movable bones and their coarse space", 2.0 * vectors * 9.0 * layout_.num_unknowns * 8);
+    // H Z (3 turns per bone and the recycled directions, at most) and the
+    // recycled directions' columns of Z over all unknowns, rebuilt every
+    // Newton step; Z's turns are the unit-turn fits' follow fields, below
+    const double vectors = 3.0 * layout_.num_bones + 2.0 * emu_.recycled_directions;
+    out.emplace_back("movable bones and their coarse space", vectors * 9.0 * layout_.num_unknowns * 8);
     out.emplace_back("bones' unit-turn fits",
                      9.0 * 8 * layout_.num_bones * double(layout_.num_soft + model_.tets.rows()));
   }
@@ -562,7 +563,7 @@ void EmuSolver::base_precondition(const Mat9X& F, const Mat9X& in, Mat9X& out) c
 class EmuSolver::Newton {
  public:
   Newton(EmuSolver& s, const Context& c, Mat9X F)
-      : s_(s), c_(c), bones_(s.layout_.num_bones > 0), F_(std::move(F)), coarse_(s.layout_, s.emu_.alpha) {
+      : s_(s), c_(c), bones_(s.layout_.num_bones > 0), F_(std::move(F)), coarse_(s.layout_, s.emu_.alpha, s.follow_fields()) {
     s_.fit_into(c_, F_, x_, Fx_);
     E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_) + s_.contact_energy(x_);
     if (s_.has_contact()) s_.options_.contact.check_start_state(x_, E_);

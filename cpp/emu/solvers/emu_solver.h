@@ -188,6 +188,12 @@ class EmuSolver {
     Mat9X follow, fit;
   };
   std::vector<UnitTurnFits> turn_fits_;
+  /// Per movable bone its unit turn's follow field (empty without the coarse space).
+  std::vector<const Mat9X*> follow_fields() const {
+    std::vector<const Mat9X*> f;
+    for (const UnitTurnFits& t : turn_fits_) f.push_back(&t.follow);
+    return f;
+  }
 };
 
 }  // namespace emu
