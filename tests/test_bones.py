@@ -119,6 +119,10 @@ def test_bone_coarse_turn_matches_a_fit_of_the_turn(small_arm, which):
             W[(k + 2) % 3, (k + 1) % 3], W[(k + 1) % 3, (k + 2) % 3] = 1.0, -1.0
             M = W @ R
             Z, HZ = core.bone_turn(load, F, b, M, True)
+            # the coarse space takes every turn as M times the unit turn's field (bone_coarse_space.h)
+            Zunit, _ = core.bone_turn(load, F, b, np.eye(3), True)
+            ZM = (M @ Zunit.reshape(-1, 3, 3, order="C").transpose(0, 2, 1)).transpose(0, 2, 1).reshape(-1, 9)
+            np.testing.assert_allclose(Z, ZM, rtol=0, atol=1e-12 * np.abs(Z).max())
             E = np.zeros((nu, 9))
             E[ns + b] = M.ravel(order="F")
             dx = core.fit_positions(load, F + E) - core.fit_positions(load, F)

@@ -550,3 +550,6 @@ def test_single_precision_s0_is_the_old_name_of_single_precision_preconditioner(
         solver = emu.Solver(s, "emu", alpha=100.0, error_estimate=False, single_precision_s0=False)
     assert solver.settings["single_precision_preconditioner"] is False
     assert emu.Solver(s, "emu", alpha=100.0, error_estimate=False).settings["single_precision_preconditioner"] is True
+    with pytest.raises(ValueError, match="give only single_precision_preconditioner"):
+        emu.Solver(s, "emu", alpha=100.0, error_estimate=False, single_precision_s0=False,
+                   single_precision_preconditioner=True)

@@ -295,7 +295,7 @@ class Solver:
                  error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
                  lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8,
                  eigen_filter: str = "clamp", negative_curvature: bool = True, fem_correction: bool | None = None,
-                 step_fraction: float = STEP_FRACTION, single_precision_preconditioner: bool = True,
+                 step_fraction: float = STEP_FRACTION, single_precision_preconditioner: bool | None = None,
                  single_precision_s0: bool | None = None):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -414,10 +414,14 @@ class Solver:
                 raise ValueError(f"lbfgs_memory must be >= 1, got {lbfgs_memory}")
             eo.lbfgs_memory = int(lbfgs_memory)
             if single_precision_s0 is not None:
+                if single_precision_preconditioner is not None:
+                    raise ValueError("single_precision_s0 is the old name of single_precision_preconditioner; "
+                                     "give only single_precision_preconditioner")
                 warnings.warn("single_precision_s0 is now single_precision_preconditioner (it rounds the "
                               "block inverses too); use that name", DeprecationWarning, stacklevel=2)
                 single_precision_preconditioner = single_precision_s0
-            eo.single_precision_preconditioner = bool(single_precision_preconditioner)
+            eo.single_precision_preconditioner = (True if single_precision_preconditioner is None
+                                                  else bool(single_precision_preconditioner))
             self._core = _core.EmuSolver(self.model, opts, eo)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
                                  single_precision_preconditioner=eo.single_precision_preconditioner,

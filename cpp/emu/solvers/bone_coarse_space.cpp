@@ -115,7 +115,7 @@ void BoneCoarseSpace::project_Z(const Mat9X& v, Eigen::VectorXd& c) const {
           for (int e = 0; e < nx; ++e) part(9 * nb + e) += Zx_.col(e).segment<9>(9 * u).dot(Eigen::Map<const Vec9>(r));
         }
       },
-      parts_, sums);
+      parts_z_, sums);
   c.resize(3 * nb + nx);
   for (int b = 0; b < nb; ++b)
     for (int k = 0; k < 3; ++k)

@@ -91,7 +91,8 @@ class BoneCoarseSpace {
   bool built_ = false, balancing_ = false;
   std::vector<NeutralMode> neutral_;
   mutable Mat9X r1_;
-  mutable Eigen::MatrixXd parts_;  // nz by kSumChunks partial projections
+  mutable Eigen::MatrixXd parts_;    // nz by kSumChunks partial projections (H Z)
+  mutable Eigen::MatrixXd parts_z_;  // the same for Z's (9 #bones + recycled rows): no resize per use
   mutable Eigen::VectorXd c1_, c2_;
   mutable std::vector<Mat3> combined_;  // sum_k c_bk M_bk per bone (combine_Z)
 };
