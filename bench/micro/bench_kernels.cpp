@@ -143,19 +143,26 @@ void stream_triad(benchmark::State& state) {
 }
 }  // namespace
 
-/// The 9x9 block inverses of a preconditioner rebuild: Eigen's LLT solve with
-/// the identity against spd_inverse (blocks: filtered SNH Hessians plus an
-/// ACAP diagonal, as the preconditioners see them).
-void block_inverse(benchmark::State& state, bool own) {
+/// Blocks as the preconditioners see them: filtered SNH Hessians plus an ACAP diagonal.
+static std::vector<Mat9> preconditioner_blocks() {
   const auto Fs = random_gradients(kElements, 0.3);
   const TetMaterial m{kMu, kLambda, 3e4, Vec3(0.0, 0.0, 1.0)};
-  std::vector<Mat9> A(kElements), inv(kElements);
+  std::vector<Mat9> A(kElements);
   for (int e = 0; e < kElements; ++e) {
     Mat9 H_psd;
     material_hessians(m, Fs[e], EigenFilter::Clamp, &H_psd, nullptr);
     A[e] = H_psd;
     A[e].diagonal().array() += 100.0 * kMu;
   }
+  return A;
+}
+
+/// The 9x9 block inverses of a preconditioner rebuild: Eigen's LLT solve with
+/// the identity against spd_inverse (blocks: filtered SNH Hessians plus an
+/// ACAP diagonal, as the preconditioners see them).
+void block_inverse(benchmark::State& state, bool own) {
+  const std::vector<Mat9> A = preconditioner_blocks();
+  std::vector<Mat9> inv(kElements);
   for (auto _ : state) {
     for (int e = 0; e < kElements; ++e) {
       if (own) spd_inverse<9>(A[e], inv[e]);
@@ -170,15 +177,8 @@ void block_inverse(benchmark::State& state, bool own) {
 // invert_spd_blocks: four blocks side by side per spd_inverse_lanes call (the
 // same bits as spd_inverse), as ConstantSchur::update inverts them.
 void block_inverse_lanes(benchmark::State& state) {
-  const auto Fs = random_gradients(kElements, 0.3);
-  const TetMaterial m{kMu, kLambda, 3e4, Vec3(0.0, 0.0, 1.0)};
-  std::vector<Mat9> A(kElements), inv(kElements);
-  for (int e = 0; e < kElements; ++e) {
-    Mat9 H_psd;
-    material_hessians(m, Fs[e], EigenFilter::Clamp, &H_psd, nullptr);
-    A[e] = H_psd;
-    A[e].diagonal().array() += 100.0 * kMu;
-  }
+  const std::vector<Mat9> A = preconditioner_blocks();
+  std::vector<Mat9> inv(kElements);
   for (auto _ : state) {
     invert_spd_blocks<9>(A, [&](long u, const Mat9& B, bool) { inv[u] = B; });
     benchmark::DoNotOptimize(inv.data());
