@@ -1,7 +1,7 @@
 #pragma once
 // A symmetric positive definite 9x9 block kept in single precision for a
 // preconditioner: half the bytes a CG iteration streams per block pass
-// (docs/DESIGN.md, "Preconditioner blocks in single precision").
+// (docs/DESIGN.md, "The block inverses in single precision").
 //
 // Rounding each entry of an SPD B moves it by E with |E_ij| <= u |B_ij|
 // (u = 2^-24), so ||E||_2 <= ||E||_F <= 9 u max|B_ij|: an ill-conditioned B
