@@ -2,6 +2,9 @@
 #include <cmath>
 #include <random>
 #include <stdexcept>
+#include <thread>
+
+#include <dirent.h>
 
 #include <omp.h>
 
@@ -14,6 +17,7 @@
 #include "emu/linalg/modes.h"
 #include "emu/linalg/negative_curvature.h"
 #include "emu/linalg/rounded_block.h"
+#include "emu/linalg/serial_openmp_scope.h"
 #include "emu/linalg/spd_inverse.h"
 #include "emu/linalg/supernodal_solve.h"
 #include "emu/linalg/symmetric_product.h"
@@ -364,6 +368,63 @@ TEST(cholmod_empty_matrix_factorises_and_solves_nothing) {
   CHECK(f.factorized());
   f.solve(nullptr, nullptr, 3);
   CHECK(f.rows() == 0 && f.factor_nnz() == 0.0);
+}
+
+// The number of threads of this process (Linux: one entry per thread in /proc/self/task).
+static int process_threads() {
+  int n = 0;
+  if (DIR* d = opendir("/proc/self/task")) {
+    while (const dirent* e = readdir(d))
+      if (e->d_name[0] != '.') ++n;
+    closedir(d);
+  }
+  return n;
+}
+
+TEST(serial_openmp_scope_runs_regions_on_one_thread_and_restores) {
+  const int levels = omp_get_max_active_levels();
+  int inside = 0, after = 0;
+  {
+    const SerialOpenMPScope serial;
+#pragma omp parallel num_threads(4)
+#pragma omp single
+    inside = omp_get_num_threads();
+  }
+#pragma omp parallel num_threads(4)
+#pragma omp single
+  after = omp_get_num_threads();
+  CHECK(inside == 1);
+  CHECK(after > 1);  // the num_threads clause wins again once the scope ends
+  CHECK(omp_get_max_active_levels() == levels);
+}
+
+TEST(cholmod_factorisation_starts_no_threads) {
+  // CHOLMOD 3's supernodal factorisation opens OpenMP regions with a fixed
+  // num_threads(4) (serial_openmp_scope.h). A thread of its own factorises, so
+  // any OpenMP team it started would appear as new threads of the process
+  // (libgomp keeps a team's threads per master thread until that exits); its
+  // solve and the change to a simplicial factor are checked alike.
+  std::vector<int> p, i;
+  std::vector<double> x;
+  Eigen::MatrixXd dense;
+  grid_laplacian_3d(12, 1.0, p, i, x, dense);
+  int before = 0, after = 0;
+  bool factorised = false;
+  std::thread worker([&] {
+    before = process_threads();
+    CholmodFactor f;
+    f.analyze(static_cast<int>(p.size()) - 1, p.data(), i.data());
+    factorised = f.factorize(x.data());
+    std::vector<double> b(p.size() - 1, 1.0);
+    f.solve(b.data(), b.data(), 1);  // CHOLMOD's own solve
+    f.make_simplicial();
+    factorised = factorised && f.factorize(x.data());  // simplicial refactorisation
+    after = process_threads();
+  });
+  worker.join();
+  CHECK(factorised);
+  CHECK(before > 0);
+  CHECK(after == before);
 }
 
 // round_spd_block keeps an SPD block definite in float however ill

@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "emu/linalg/serial_openmp_scope.h"
 #include "emu/linalg/supernodal_solve.h"
 
 namespace emu {
@@ -94,7 +95,10 @@ bool CholmodFactor::factorize(const double* values) {
   if (!A_ || !L_) throw std::logic_error("CholmodFactor::factorize before analyze");
   const size_t nnz = static_cast<const int*>(A_->p)[n_];
   std::memcpy(A_->x, values, sizeof(double) * nnz);
-  cholmod_factorize(A_, L_, &common_);
+  {
+    const SerialOpenMPScope serial_regions;  // CHOLMOD's fixed 4-thread regions (serial_openmp_scope.h)
+    cholmod_factorize(A_, L_, &common_);
+  }
   if (common_.status == CHOLMOD_NOT_POSDEF) {
     factorized_ = false;
     return false;

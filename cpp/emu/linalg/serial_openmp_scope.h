@@ -1,0 +1,29 @@
+#pragma once
+// While alive, every OpenMP parallel region the calling thread opens runs on
+// that thread alone (max-active-levels 0: no region is active).
+//
+// Why: CHOLMOD 3 (Debian's SuiteSparse 5) opens OpenMP regions inside its
+// supernodal numeric factorisation, per supernode (zeroing and scattering
+// into the supernode's panel), with a fixed num_threads(CHOLMOD_OMP_NUM_THREADS
+// = 4) clause that overrides omp_set_num_threads. On a 2-core machine that is
+// a team of 4 woken for a few hundred entries, thousands of times: at 81k
+// tets `perf` put a third of EMU's setup in the futex wakes and waits, and
+// a "1 thread" run used more than one core. The parallel work of the
+// factorisation is its BLAS (OpenBLAS's own threads, set by set_threads), so
+// those regions are run serially (docs/DESIGN.md, "CHOLMOD's OpenMP regions").
+#include <omp.h>
+
+namespace emu {
+
+class SerialOpenMPScope {
+ public:
+  SerialOpenMPScope() : saved_(omp_get_max_active_levels()) { omp_set_max_active_levels(0); }
+  ~SerialOpenMPScope() { omp_set_max_active_levels(saved_); }
+  SerialOpenMPScope(const SerialOpenMPScope&) = delete;
+  SerialOpenMPScope& operator=(const SerialOpenMPScope&) = delete;
+
+ private:
+  int saved_;
+};
+
+}  // namespace emu
