@@ -483,10 +483,11 @@ TEST(spd_inverse_lanes_give_the_same_bits_and_flag_indefinite_blocks) {
   A[12] = -Mat9d::Identity();    // the left-over block
   std::vector<Mat9d> inv(A.size());
   std::vector<int> ok(A.size(), -1);
-  invert_spd_blocks<9>(A, [&](long u, const Mat9d& B, bool good) {
+  const long refused = invert_spd_blocks<9>(A, [&](long u, const Mat9d& B, bool good) {
     inv[u] = B;
     ok[u] = good;
   });
+  CHECK(refused == 3);
   for (size_t u = 0; u < A.size(); ++u) {
     Mat9d ref;
     const bool good = spd_inverse<9>(A[u], ref);

@@ -12,7 +12,6 @@
 // B_ii + delta included): B~ >= B in the Loewner order, definite whenever B
 // is, and exactly symmetric. Products cast the block back to double: the
 // preconditioner stays one fixed linear map.
-#include <algorithm>
 #include <cmath>
 
 #include <Eigen/Core>

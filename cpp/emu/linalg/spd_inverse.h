@@ -111,23 +111,30 @@ void spd_inverse_lanes(const Eigen::Matrix<double, N, N>* A, Eigen::Matrix<doubl
 /// inv = A[u]^-1 where ok. Four blocks per spd_inverse_lanes call, in
 /// parallel (store runs inside the parallel loop: it must not throw), the
 /// last partial group one by one. The same bits as spd_inverse per block.
+/// Returns the number of blocks that were not positive definite (ok false).
 template <int N, class Store>
-void invert_spd_blocks(const std::vector<Eigen::Matrix<double, N, N>>& A, Store&& store) {
+long invert_spd_blocks(const std::vector<Eigen::Matrix<double, N, N>>& A, Store&& store) {
   using Block = Eigen::Matrix<double, N, N>;
   constexpr long kLanes = 4;
   const long n = static_cast<long>(A.size()), groups = n / kLanes;
-#pragma omp parallel for schedule(static)
+  long refused = 0;
+#pragma omp parallel for schedule(static) reduction(+ : refused)
   for (long g = 0; g < groups; ++g) {
     Block inv[kLanes];
     bool ok[kLanes];
     spd_inverse_lanes<N, kLanes>(A.data() + g * kLanes, inv, ok);
-    for (long l = 0; l < kLanes; ++l) store(g * kLanes + l, inv[l], ok[l]);
+    for (long l = 0; l < kLanes; ++l) {
+      store(g * kLanes + l, inv[l], ok[l]);
+      refused += !ok[l];
+    }
   }
   for (long u = groups * kLanes; u < n; ++u) {
     Block inv;
     const bool ok = spd_inverse<N>(A[u], inv);
     store(u, inv, ok);
+    refused += !ok;
   }
+  return refused;
 }
 
 }  // namespace emu

@@ -3,7 +3,6 @@
 #include "emu/linalg/spd_inverse.h"
 #include "emu/solvers/schur_form.h"
 
-#include <algorithm>
 #include <cmath>
 
 namespace emu {
@@ -59,14 +58,12 @@ void ConstantSchur::set_alpha(double alpha) {
 }
 
 bool ConstantSchur::update(const std::vector<Mat9>& A) {
-  std::vector<char> bad(A.size(), 0);  // per block: the flags are written inside the parallel loop
-  invert_spd_blocks<9>(A, [&](long u, const Mat9& inv, bool ok) {
+  const long refused = invert_spd_blocks<9>(A, [&](long u, const Mat9& inv, bool ok) {
     const Mat9 B = ok ? inv : Mat9::Zero();
-    bad[u] = !ok;
     if (single_precision_) round_spd_block(B, Ainv_rounded_[u]);
     else Ainv_[u] = B;
   });
-  ok_ = std::find(bad.begin(), bad.end(), 1) == bad.end();
+  ok_ = refused == 0;
   return ok_;
 }
 
