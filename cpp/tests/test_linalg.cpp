@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "check.h"
+#include "emu/linalg/blas_info.h"
 #include "emu/linalg/cholmod_factor.h"
 #include "emu/linalg/modes.h"
 #include "emu/linalg/negative_curvature.h"
@@ -425,6 +426,29 @@ TEST(cholmod_factorisation_starts_no_threads) {
   CHECK(factorised);
   CHECK(before > 0);
   CHECK(after == before);
+}
+
+TEST(blas_threads_scope_sets_and_restores_openblas_threads) {
+  const int threads = blas_threads();
+  if (threads <= 0) return;  // not OpenBLAS: nothing to set (the scope is a no-op)
+  set_blas_threads(2);
+  {
+    const BlasThreadsScope one(1);
+    CHECK(blas_threads() == 1);
+    const BlasThreadsScope unchanged(0);
+    CHECK(blas_threads() == 1);
+  }
+  CHECK(blas_threads() == 2);
+  // a small factorisation runs on one BLAS thread and leaves the count as it was
+  std::vector<int> p, i;
+  std::vector<double> x;
+  Eigen::MatrixXd dense;
+  grid_laplacian_3d(8, 1.0, p, i, x, dense);
+  CholmodFactor f;
+  f.analyze(static_cast<int>(p.size()) - 1, p.data(), i.data());
+  CHECK(f.factorize(x.data()));
+  CHECK(blas_threads() == 2);
+  set_blas_threads(threads);
 }
 
 // round_spd_block keeps an SPD block definite in float however ill

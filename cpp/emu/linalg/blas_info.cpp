@@ -33,14 +33,51 @@ BlasInfo blas_info() {
   return r;
 }
 
+namespace {
+// OpenBLAS's thread getter and setter, looked up once (null for another BLAS).
+struct OpenBlasThreads {
+  int (*get)() = nullptr;
+  void (*set)(int) = nullptr;
+  OpenBlasThreads() {
+    if (void* h = blas_handle()) {
+      get = reinterpret_cast<int (*)()>(dlsym(h, "openblas_get_num_threads"));
+      set = reinterpret_cast<void (*)(int)>(dlsym(h, "openblas_set_num_threads"));
+      dlclose(h);  // RTLD_NOLOAD: the library stays loaded (dgemm_ comes from it)
+    }
+  }
+};
+const OpenBlasThreads& openblas_threads() {
+  static const OpenBlasThreads f;
+  return f;
+}
+}  // namespace
+
+int blas_threads() {
+  const auto& f = openblas_threads();
+  return f.get ? f.get() : -1;
+}
+
+void set_blas_threads(int n) {
+  const auto& f = openblas_threads();
+  if (n > 0 && f.set) f.set(n);
+}
+
 void set_threads(int n) {
   if (n <= 0) return;
   omp_set_num_threads(n);
-  if (void* h = blas_handle()) {
-    using set_fn = void (*)(int);
-    if (auto f = reinterpret_cast<set_fn>(dlsym(h, "openblas_set_num_threads"))) f(n);
-    dlclose(h);
-  }
+  set_blas_threads(n);
+}
+
+BlasThreadsScope::BlasThreadsScope(int n) {
+  if (n <= 0) return;
+  const int now = blas_threads();
+  if (now <= 0 || now == n) return;
+  saved_ = now;
+  set_blas_threads(n);
+}
+
+BlasThreadsScope::~BlasThreadsScope() {
+  if (saved_ > 0) set_blas_threads(saved_);
 }
 
 }  // namespace emu

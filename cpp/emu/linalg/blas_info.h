@@ -18,4 +18,24 @@ BlasInfo blas_info();
 /// n <= 0 leaves both unchanged.
 void set_threads(int n);
 
+/// OpenBLAS's thread count (-1 for another BLAS) and a setter (a no-op for
+/// another BLAS or n <= 0). The count is process-wide.
+int blas_threads();
+void set_blas_threads(int n);
+
+/// While alive, OpenBLAS runs on n threads (n <= 0: unchanged); the old count
+/// is restored after. For BLAS work too small to gain from threads, where
+/// OpenBLAS's worker would only contend with the OpenMP team (DESIGN.md,
+/// "OpenBLAS's threads on small factors").
+class BlasThreadsScope {
+ public:
+  explicit BlasThreadsScope(int n);
+  ~BlasThreadsScope();
+  BlasThreadsScope(const BlasThreadsScope&) = delete;
+  BlasThreadsScope& operator=(const BlasThreadsScope&) = delete;
+
+ private:
+  int saved_ = -1;
+};
+
 }  // namespace emu

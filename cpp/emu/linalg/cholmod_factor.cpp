@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "emu/linalg/blas_info.h"
 #include "emu/linalg/serial_openmp_scope.h"
 #include "emu/linalg/supernodal_solve.h"
 
@@ -97,6 +98,10 @@ bool CholmodFactor::factorize(const double* values) {
   std::memcpy(A_->x, values, sizeof(double) * nnz);
   {
     const SerialOpenMPScope serial_regions;  // CHOLMOD's fixed 4-thread regions (serial_openmp_scope.h)
+    // OpenBLAS's threads gain only on large factors; on small ones its worker
+    // contends with the spinning OpenMP team (DESIGN.md, "OpenBLAS's threads
+    // on small factors").
+    const BlasThreadsScope blas(L_->is_super && L_->xsize >= kThreadedBlasFactorEntries ? 0 : 1);
     cholmod_factorize(A_, L_, &common_);
   }
   if (common_.status == CHOLMOD_NOT_POSDEF) {

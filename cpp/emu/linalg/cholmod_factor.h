@@ -3,6 +3,7 @@
 // (simplicial after make_simplicial).
 // Symbolic analysis (fill-reducing ordering) happens once per pattern;
 // numeric factorisations and solves reuse it.
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -56,6 +57,14 @@ class CholmodFactor {
   const cholmod_factor* factor() const { return L_; }
   /// Entries of A (upper triangle) as analysed.
   const cholmod_sparse* matrix() const { return A_; }
+
+  /// Supernodal factors with at least this many entries are factorised with
+  /// OpenBLAS's threads as set_threads set them, smaller ones on one BLAS
+  /// thread: measured at 2 threads, FEM's 28M-entry factor (fusiform_80k)
+  /// 1.4x faster threaded, its 3.6M-entry factor (fusiform_20k) no faster,
+  /// and the demo's small ones 2x slower (DESIGN.md, "OpenBLAS's threads on
+  /// small factors"). Between 3.6M and 28M not measured.
+  static constexpr std::size_t kThreadedBlasFactorEntries = 10'000'000;
 
  private:
   void check(const char* what) const;
