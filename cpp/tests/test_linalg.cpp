@@ -384,6 +384,7 @@ static int process_threads() {
 
 TEST(serial_openmp_scope_runs_regions_on_one_thread_and_restores) {
   const int levels = omp_get_max_active_levels();
+  omp_set_dynamic(0);  // the team sizes asked for, not the runtime's choice
   int inside = 0, after = 0;
   {
     const SerialOpenMPScope serial;
@@ -395,7 +396,7 @@ TEST(serial_openmp_scope_runs_regions_on_one_thread_and_restores) {
 #pragma omp single
   after = omp_get_num_threads();
   CHECK(inside == 1);
-  CHECK(after > 1);  // the num_threads clause wins again once the scope ends
+  if (omp_get_thread_limit() >= 2) CHECK(after > 1);  // the num_threads clause wins again after the scope
   CHECK(omp_get_max_active_levels() == levels);
 }
 
@@ -425,7 +426,7 @@ TEST(cholmod_factorisation_starts_no_threads) {
   worker.join();
   CHECK(factorised);
   CHECK(before > 0);
-  CHECK(after == before);
+  CHECK(after <= before);  // none started (one may have ended meanwhile)
 }
 
 TEST(blas_threads_scope_sets_and_restores_openblas_threads) {
@@ -439,6 +440,12 @@ TEST(blas_threads_scope_sets_and_restores_openblas_threads) {
     CHECK(blas_threads() == 1);
   }
   CHECK(blas_threads() == 2);
+  {  // a count asked for while a scope is open (another thread's set_threads) is kept after it
+    const BlasThreadsScope one(1);
+    set_blas_threads(3);
+  }
+  CHECK(blas_threads() == 3);
+  set_blas_threads(2);
   // a small factorisation runs on one BLAS thread and leaves the count as it was
   std::vector<int> p, i;
   std::vector<double> x;

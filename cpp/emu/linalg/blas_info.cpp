@@ -1,5 +1,7 @@
 #include "emu/linalg/blas_info.h"
 
+#include <atomic>
+
 #include <dlfcn.h>
 #include <omp.h>
 
@@ -50,6 +52,15 @@ const OpenBlasThreads& openblas_threads() {
   static const OpenBlasThreads f;
   return f;
 }
+
+// The count last asked for by set_blas_threads (0: never), which a
+// BlasThreadsScope restores.
+std::atomic<int> requested_blas_threads{0};
+
+void set_openblas(int n) {
+  const auto& f = openblas_threads();
+  if (n > 0 && f.set) f.set(n);
+}
 }  // namespace
 
 int blas_threads() {
@@ -58,8 +69,9 @@ int blas_threads() {
 }
 
 void set_blas_threads(int n) {
-  const auto& f = openblas_threads();
-  if (n > 0 && f.set) f.set(n);
+  if (n <= 0) return;
+  requested_blas_threads.store(n);
+  set_openblas(n);
 }
 
 void set_threads(int n) {
@@ -73,11 +85,13 @@ BlasThreadsScope::BlasThreadsScope(int n) {
   const int now = blas_threads();
   if (now <= 0 || now == n) return;
   saved_ = now;
-  set_blas_threads(n);
+  set_openblas(n);
 }
 
 BlasThreadsScope::~BlasThreadsScope() {
-  if (saved_ > 0) set_blas_threads(saved_);
+  if (saved_ <= 0) return;
+  const int asked = requested_blas_threads.load();
+  set_openblas(asked > 0 ? asked : saved_);
 }
 
 }  // namespace emu

@@ -19,14 +19,17 @@ BlasInfo blas_info();
 void set_threads(int n);
 
 /// OpenBLAS's thread count (-1 for another BLAS) and a setter (a no-op for
-/// another BLAS or n <= 0). The count is process-wide.
+/// another BLAS or n <= 0). The count is process-wide; the setter (and
+/// set_threads) also records n as the count asked for.
 int blas_threads();
 void set_blas_threads(int n);
 
-/// While alive, OpenBLAS runs on n threads (n <= 0: unchanged); the old count
-/// is restored after. For BLAS work too small to gain from threads, where
-/// OpenBLAS's worker would only contend with the OpenMP team (DESIGN.md,
-/// "OpenBLAS's threads on small factors").
+/// While alive, OpenBLAS runs on n threads (n <= 0: unchanged). After, the
+/// count last asked for through set_threads / set_blas_threads is restored
+/// (the count found on entry if none was), so a set_threads from another
+/// thread meanwhile is not undone. For BLAS work too small to gain from
+/// threads, where OpenBLAS's worker would only contend with the OpenMP team
+/// (DESIGN.md, "OpenBLAS's threads on small factors").
 class BlasThreadsScope {
  public:
   explicit BlasThreadsScope(int n);

@@ -11,6 +11,11 @@
 // a "1 thread" run used more than one core. The parallel work of the
 // factorisation is its BLAS (OpenBLAS's own threads, set by set_threads), so
 // those regions are run serially (docs/DESIGN.md, "CHOLMOD's OpenMP regions").
+//
+// max-active-levels is a per-thread setting in libgomp since GCC 11 (the
+// calling thread's task ICVs; checked in Debian's GCC 12 libgomp), so
+// solvers factorising at once in several threads do not undo each other's
+// scope. An OpenMP build of OpenBLAS would run serially inside the scope too.
 #include <omp.h>
 
 namespace emu {
