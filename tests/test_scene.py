@@ -158,3 +158,25 @@ def test_pose_about_takes_centre():
         emu.pose_about([0, 0, 1], 90, center=[1, 1, 0])
     with pytest.raises(ValueError, match="centre must be a finite 3-vector"):
         emu.pose_about([0, 0, 1], 90, [1, 1])
+
+
+def test_connected_components_match_an_independent_graph_search():
+    # emu.checks.connected_components (a union-find in the C++ core) against
+    # scipy's connected components of the same vertex graph: the same pieces,
+    # each labelled by its smallest vertex id; vertices of no tet alone.
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components as scipy_components
+    rng = np.random.default_rng(3)
+    for n, m in ((30, 8), (200, 60), (500, 400), (7, 0)):
+        tets = np.array([rng.choice(n, 4, replace=False) for _ in range(m)], dtype=np.int64).reshape(-1, 4)
+        labels = emu.checks.connected_components(n, tets)
+        rows = np.repeat(tets, 4, axis=1).ravel()
+        cols = np.tile(tets, (1, 4)).ravel()
+        graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+        count, ref = scipy_components(graph, directed=False)
+        assert len(np.unique(labels)) == count
+        for piece in range(count):
+            members = np.flatnonzero(ref == piece)
+            assert np.all(labels[members] == members.min())
+    with pytest.raises(ValueError, match="outside"):
+        emu.checks.connected_components(4, np.array([[0, 1, 2, 4]]))

@@ -2,6 +2,7 @@
 #include <pybind11/stl.h>
 
 #include "bind.h"
+#include "emu/mesh/connected_components.h"
 #include "emu/mesh/harmonic_field.h"
 #include "emu/mesh/tet_geometry.h"
 
@@ -24,6 +25,8 @@ void bind_mesh(py::module_& m) {
   m.def("harmonic_field", &harmonic_field, py::arg("X"), py::arg("T"), py::arg("fixed"), py::arg("values"),
         py::call_guard<py::gil_scoped_release>(),
         "P1 Laplace solve on tets T with values fixed at vertex ids -> #V field");
+  m.def("connected_components", &connected_components, py::arg("num_vertices"), py::arg("T"),
+        "#V, T  #T by 4 indices -> #V labels: the smallest vertex id of each vertex's piece");
   m.def("tet_gradients", &tet_gradients, py::arg("X"), py::arg("T"), py::arg("phi"),
         "per-tet gradient of a P1 field -> #T by 3");
 }

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import _core
 from .geometry import bbox_diagonal
 
 __all__ = ["MeshReport", "check_mesh", "tet_quality", "signed_volumes", "connected_components",
@@ -137,28 +138,15 @@ def check_mesh(points, tets):
 
 
 def connected_components(num_vertices: int, tets: np.ndarray) -> np.ndarray:
-    """Component label per vertex of the tet graph (unused vertices get their own)."""
-    parent = np.arange(num_vertices)
+    """Component label per vertex of the tet graph: the smallest vertex id of its
+    piece (a vertex of no tet is its own piece).
 
-    def find(a):
-        while True:
-            pa = parent[a]
-            gp = parent[pa]
-            if np.array_equal(pa, gp):
-                return pa
-            parent[a] = gp
-            a = gp
-
-    # vectorised union-find by repeated pointer jumping over the edges
-    edges = np.concatenate([tets[:, [0, k]] for k in (1, 2, 3)], axis=0)
-    while True:
-        ra, rb = find(edges[:, 0]), find(edges[:, 1])
-        diff = ra != rb
-        if not diff.any():
-            break
-        lo, hi = np.minimum(ra[diff], rb[diff]), np.maximum(ra[diff], rb[diff])
-        parent[hi] = lo
-    return find(np.arange(num_vertices))
+    num_vertices  #V
+    tets          (#T, 4) vertex ids in [0, #V)
+    Returns (#V,) int64 labels (a union-find in the C++ core: one pass over the tets).
+    """
+    tets = np.asarray(tets).reshape(-1, 4)
+    return _core.connected_components(int(num_vertices), tets.astype(np.int32, copy=False)).astype(np.int64)
 
 
 def check_anchored(num_vertices: int, tets: np.ndarray, pinned: np.ndarray, links=(), anchors=()):
