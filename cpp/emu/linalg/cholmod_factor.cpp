@@ -31,12 +31,10 @@ CholmodFactor::CholmodFactor() {
   // A simplicial factor (make_simplicial) refactorises as LL', not LDL': an
   // indefinite matrix is then reported, as by the supernodal factorisation.
   common_.final_ll = 1;
-  // Orderings tried: AMD and METIS, the one with less fill kept. By default
-  // CHOLMOD tries METIS only where AMD's flops per factor entry exceed 500; the
-  // ACAP matrix of a compact 3D mesh stays under that while METIS's nested
-  // dissection fills 24% less (81k-tet fusiform: 3.29M against 4.32M entries,
-  // a fit 18 against 20 ms; FEM's 3n matrix keeps AMD's ordering, 28M both).
-  common_.nmethods = 3;
+  // Orderings: CHOLMOD's default (AMD; METIS too only where AMD's is poor,
+  // flops per factor entry >= 500 and fill >= 5x) unless metis_from_rows says
+  // otherwise (see analyze).
+  common_.nmethods = 0;
   common_.print = 0;
   common_.error_handler = record_error;
 }
@@ -71,6 +69,9 @@ void CholmodFactor::analyze(int n, const int* col_ptr, const int* row_index) {
   std::memcpy(A_->p, col_ptr, sizeof(int) * (n + 1));
   std::memcpy(A_->i, row_index, sizeof(int) * nnz);
   std::memset(A_->x, 0, sizeof(double) * nnz);
+  // nmethods 3: the user's ordering (none: skipped), AMD and METIS, the one
+  // with less fill kept; 0: CHOLMOD's default choice.
+  common_.nmethods = (metis_from_rows_ > 0 && n >= metis_from_rows_) ? 3 : 0;
   L_ = cholmod_analyze(A_, &common_);
   check("analyze");
   if (!L_) throw std::runtime_error("CHOLMOD analysis failed (out of memory?)");

@@ -24,6 +24,11 @@ class CholmodFactor {
   /// in compressed-column form (sorted row indices).
   void analyze(int n, const int* col_ptr, const int* row_index);
 
+  /// From the next analyze on, matrices of at least `rows` rows try both AMD
+  /// and METIS and keep the ordering with less fill; smaller ones (and every
+  /// matrix when rows <= 0, the default) get CHOLMOD's default choice.
+  void set_metis_from_rows(int rows) { metis_from_rows_ = rows; }
+
   /// The pattern and symbolic analysis of another factor (no new ordering):
   /// for a second matrix with the same pattern.
   void analyze_like(const CholmodFactor& other);
@@ -83,6 +88,7 @@ class CholmodFactor {
   mutable std::vector<double> rows_, scratch_;  // solve_rows' work: n x lanes, and the kernel's buffers
   mutable SupernodalSchedule schedule_;  // of L's supernodes, made at the first solve_rows after analyze
   int n_ = 0;
+  int metis_from_rows_ = 0;
   bool factorized_ = false;
 };
 
