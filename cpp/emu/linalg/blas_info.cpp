@@ -22,13 +22,11 @@ BlasInfo blas_info() {
   BlasInfo r;
   Dl_info info;
   r.library = (dladdr(reinterpret_cast<void*>(&dgemm_), &info) && info.dli_fname) ? info.dli_fname : "unknown";
-  r.blas_threads = -1;
+  r.blas_threads = blas_threads();
   r.omp_threads = omp_get_max_threads();
   if (void* h = blas_handle()) {
     using config_fn = char* (*)();
-    using threads_fn = int (*)();
     if (auto f = reinterpret_cast<config_fn>(dlsym(h, "openblas_get_config"))) r.config = f();
-    if (auto f = reinterpret_cast<threads_fn>(dlsym(h, "openblas_get_num_threads"))) r.blas_threads = f();
     dlclose(h);
   }
   if (r.config.empty()) r.config = "not OpenBLAS (reference or other BLAS)";

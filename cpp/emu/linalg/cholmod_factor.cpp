@@ -31,10 +31,6 @@ CholmodFactor::CholmodFactor() {
   // A simplicial factor (make_simplicial) refactorises as LL', not LDL': an
   // indefinite matrix is then reported, as by the supernodal factorisation.
   common_.final_ll = 1;
-  // Orderings: CHOLMOD's default (AMD; METIS too only where AMD's is poor,
-  // flops per factor entry >= 500 and fill >= 5x) unless metis_from_rows says
-  // otherwise (see analyze).
-  common_.nmethods = 0;
   common_.print = 0;
   common_.error_handler = record_error;
 }
@@ -69,8 +65,9 @@ void CholmodFactor::analyze(int n, const int* col_ptr, const int* row_index) {
   std::memcpy(A_->p, col_ptr, sizeof(int) * (n + 1));
   std::memcpy(A_->i, row_index, sizeof(int) * nnz);
   std::memset(A_->x, 0, sizeof(double) * nnz);
-  // nmethods 3: the user's ordering (none: skipped), AMD and METIS, the one
-  // with less fill kept; 0: CHOLMOD's default choice.
+  // Orderings: nmethods 3 tries the user's (none: skipped), AMD and METIS and
+  // keeps the one with less fill; 0 is CHOLMOD's default (AMD; METIS too only
+  // where AMD's is poor, flops per factor entry >= 500 and fill >= 5x).
   common_.nmethods = (metis_from_rows_ > 0 && n >= metis_from_rows_) ? 3 : 0;
   L_ = cholmod_analyze(A_, &common_);
   check("analyze");
