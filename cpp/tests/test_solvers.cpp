@@ -53,6 +53,31 @@ TEST(block_assembly_matches_dense_assembly) {
   CHECK((sparse - Eigen::MatrixXd(dense.triangularView<Eigen::Upper>())).norm() <= 1e-12 * dense.norm());
 }
 
+TEST(corner_gather_matches_a_scatter_for_every_width) {
+  // Widths 1 and 3 take the unrolled path, 2 the general one; pinned
+  // vertices (free_index -1) receive nothing.
+  const Model m = bar(2, 3);
+  UnknownLayout d(m);
+  CHECK(d.num_free < m.rest.rows());  // the bar has pinned vertices
+  BlockPattern pat(m.tets, d.free_index, d.num_free, 1);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int width : {1, 2, 3}) {
+    std::vector<double> corner(m.tets.rows() * 4 * width);
+    for (double& c : corner) c = u(rng);
+    Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(width, d.num_free);
+    for (Eigen::Index t = 0; t < m.tets.rows(); ++t)
+      for (int a = 0; a < 4; ++a) {
+        const int v = d.free_index(m.tets(t, a));
+        if (v >= 0)
+          for (int c = 0; c < width; ++c) expected(c, v) += corner[(t * 4 + a) * width + c];
+      }
+    Eigen::MatrixXd out = Eigen::MatrixXd::Constant(width, d.num_free, 7.0);  // overwritten
+    pat.gather(corner.data(), width, out.data());
+    CHECK((out - expected).norm() <= 1e-13 * expected.norm());
+  }
+}
+
 TEST(fem_gradient_matches_energy_and_solve_converges) {
   const Model m = bar(2, 5);
   FemSolver fem(m, SolverOptions{});

@@ -230,7 +230,7 @@ void corner_targets(const Eigen::VectorXd& wv, const UnknownLayout& layout, Targ
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
     if (!skip.empty() && skip[t]) continue;
-    const Mat3 T = target(t);
+    const auto T = target(t);  // a map of the 9 doubles in place: no copy through the stack
     const ShapeGrads& b = layout.geometry.grad[t];
     for (int a = 0; a < 4; ++a) Eigen::Map<Vec3>(corner + t * 12 + 3 * a) = wv(t) * T * b.row(a).transpose();
   }
@@ -255,7 +255,7 @@ void AcapOperator::apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const {
 }
 
 void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const {
-  apply_C_with([&](Eigen::Index t) { return Mat3(unflatten(D.col(t))); }, R);
+  apply_C_with([&](Eigen::Index t) { return Eigen::Map<const Mat3>(D.col(t).data()); }, R);
 }
 
 void AcapOperator::apply_C_of_unknowns(const Mat9X& U, Eigen::MatrixX3d& R) const {
@@ -263,7 +263,7 @@ void AcapOperator::apply_C_of_unknowns(const Mat9X& U, Eigen::MatrixX3d& R) cons
     apply_C(U, R);
     return;
   }
-  apply_C_with([&](Eigen::Index t) { return Mat3(unflatten(U.col(layout_.tet_unknown(t)))); }, R);
+  apply_C_with([&](Eigen::Index t) { return Eigen::Map<const Mat3>(U.col(layout_.tet_unknown(t)).data()); }, R);
 }
 
 void AcapOperator::fit_of_unknowns(const Mat9X& U, Eigen::MatrixX3d& x) const {

@@ -111,7 +111,7 @@ class AcapOperator {
  private:
   void solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h, Eigen::MatrixXd& Z) const;
   void setup_bones();
-  /// apply_C with D_t = target(t) (a Mat3).
+  /// apply_C with D_t = target(t) (a Mat3, or a map of 9 doubles in column order).
   template <class TargetOf>
   void apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const;
 
