@@ -4,6 +4,7 @@
 #include "bind.h"
 #include "emu/mesh/connected_components.h"
 #include "emu/mesh/harmonic_field.h"
+#include "emu/mesh/spatial_order.h"
 #include "emu/mesh/tet_geometry.h"
 
 namespace py = pybind11;
@@ -27,6 +28,9 @@ void bind_mesh(py::module_& m) {
         "P1 Laplace solve on tets T with values fixed at vertex ids -> #V field");
   m.def("connected_components", &connected_components, py::arg("num_vertices"), py::arg("T"),
         "#V, T  #T by 4 indices -> #V labels: the smallest vertex id of each vertex's piece");
+  m.def("spatial_order", &spatial_order, py::arg("X"), py::arg("T"),
+        "X  #V by 3, T  #T by 4 indices -> #T tet ids along a Z-order curve through the centroids "
+        "(equal codes in T's order)");
   m.def("tet_gradients", &tet_gradients, py::arg("X"), py::arg("T"), py::arg("phi"),
         "per-tet gradient of a P1 field -> #T by 3");
 }

@@ -1,11 +1,13 @@
 // Assembly, FEM and EMU on a small bar: against dense assembly and finite differences.
 #include <Eigen/Dense>
+#include <algorithm>
 #include <array>
 #include <random>
 
 #include "bar_model.h"
 #include "check.h"
 #include "emu/mesh/block_pattern.h"
+#include "emu/mesh/spatial_order.h"
 #include "emu/solvers/bone_coarse_space.h"
 #include "emu/solvers/emu_solver.h"
 #include "emu/solvers/fem_solver.h"
@@ -76,6 +78,53 @@ TEST(corner_gather_matches_a_scatter_for_every_width) {
     pat.gather(corner.data(), width, out.data());
     CHECK((out - expected).norm() <= 1e-13 * expected.norm());
   }
+}
+
+TEST(spatial_order_is_a_stable_permutation_along_the_z_curve) {
+  // A bar along z with its tets shuffled: the order runs from one end to the
+  // other with short steps; two tets with the same centroid keep their order in T.
+  const Model m = bar(2, 6);
+  const Eigen::Index nt = m.tets.rows();
+  std::vector<int> shuffle(nt);
+  for (Eigen::Index t = 0; t < nt; ++t) shuffle[t] = static_cast<int>(t);
+  std::shuffle(shuffle.begin(), shuffle.end(), std::mt19937(7));
+  Eigen::MatrixX4i T(nt + 1, 4);
+  for (Eigen::Index t = 0; t < nt; ++t) T.row(t) = m.tets.row(shuffle[t]);
+  T.row(nt) = T.row(0);  // a duplicate of tet 0, listed last
+  const std::vector<int> order = spatial_order(m.rest, T);
+  CHECK(static_cast<Eigen::Index>(order.size()) == nt + 1);
+  std::vector<int> seen(nt + 1, 0);
+  for (int t : order) ++seen[t];
+  CHECK(std::all_of(seen.begin(), seen.end(), [](int k) { return k == 1; }));
+  auto centroid = [&](int t) {
+    Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+    for (int a = 0; a < 4; ++a) c += m.rest.row(T(t, a));
+    return Eigen::RowVector3d(c / 4);
+  };
+  // The bar is thin along x and y: the curve's first tet lies at one end of z, its last at the other.
+  double zmin = 1e300, zmax = -1e300;
+  for (Eigen::Index t = 0; t <= nt; ++t) zmin = std::min(zmin, centroid(t)(2)), zmax = std::max(zmax, centroid(t)(2));
+  CHECK(centroid(order.front())(2) < zmin + 0.25 * (zmax - zmin));
+  CHECK(centroid(order.back())(2) > zmax - 0.25 * (zmax - zmin));
+  // Locality: consecutive tets in the order are closer than in the shuffled T.
+  double step_order = 0, step_given = 0;
+  for (Eigen::Index k = 1; k <= nt; ++k) {
+    step_order += (centroid(order[k]) - centroid(order[k - 1])).norm();
+    step_given += (centroid(static_cast<int>(k)) - centroid(static_cast<int>(k - 1))).norm();
+  }
+  CHECK(step_order < 0.5 * step_given);
+  const auto first = std::find(order.begin(), order.end(), 0), dup = std::find(order.begin(), order.end(), static_cast<int>(nt));
+  CHECK(first < dup);  // equal codes keep T's order
+  Eigen::MatrixX4i bad = T;
+  bad(0, 0) = static_cast<int>(m.rest.rows());
+  bool threw = false;
+  try {
+    spatial_order(m.rest, bad);
+  } catch (const std::invalid_argument&) {
+    threw = true;
+  }
+  CHECK(threw);
+  CHECK(spatial_order(m.rest, Eigen::MatrixX4i(0, 4)).empty());
 }
 
 TEST(fem_gradient_matches_energy_and_solve_converges) {

@@ -12,7 +12,7 @@ from . import _core
 from .checks import inverted_tets
 from .contact import ContactTerm
 from .geometry import bbox_diagonal, vertex_error
-from .lowering import build_model, declared_joint_rows, declared_joint_world
+from .lowering import build_model, declared_joint_rows, declared_joint_world, model_tet_order
 from .poses import parse_pose
 from .runtime import set_threads
 from .scene import Scene
@@ -323,10 +323,10 @@ class Solver:
         self.scene, self.method, self.step = scene, method, step
         self.accuracy = None if accuracy is None else float(accuracy)
         self.alpha = float(alpha)
-        self.model = build_model(scene)
+        self._model_tets = model_tet_order(scene)  # the scene's tet of each model tet
+        self.model = build_model(scene, tet_order=self._model_tets)
         self.fibers = np.zeros((len(scene.tets), 3))
-        self.fibers[scene.model_tets] = np.asarray(self.model.fiber)  # muscles always carry unknowns
-        self._model_tets = scene.model_tets
+        self.fibers[self._model_tets] = np.asarray(self.model.fiber)  # muscles always carry unknowns
         opts = _core.SolverOptions()
         opts.rtol_grad, opts.rtol_energy = float(rtol_grad), float(rtol_energy)
         opts.noise_factor = float(noise_factor)

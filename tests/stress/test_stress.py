@@ -120,24 +120,24 @@ def test_accuracy_not_reached_is_reported():
 
 def test_fem_leaves_a_saddle_along_negative_curvature():
     """At Poisson 0.4999 the contracted muscle buckles: the symmetric shape is a
-    saddle, and FEM's filtered Newton steps stay on it until round-off grows the
-    asymmetry (302 steps). With the negative-curvature step (the default) FEM
-    converges in under 100 to a local minimum: the exact Hessian of the reduced
-    unknowns there is positive definite (a dense eigen-solve), and the energy is
-    below the saddle's."""
+    saddle, and FEM's filtered Newton steps stay on it: depending on round-off
+    (the tets' order) they wander there past 150 steps or pass the gradient
+    test on the saddle itself (114 steps, |g| / |g0| = 9e-7). With the
+    negative-curvature step (the default) FEM converges in under 100 to a local
+    minimum: the exact Hessian of the reduced unknowns there is positive
+    definite (a dense eigen-solve), and the energy is below the saddle's."""
     s = pinned_muscle(poisson=0.4999)
     act = {"belly": 5e4}
     slow = emu.Solver(s, "fem", max_iterations=150, negative_curvature=False).solve(act)
-    assert not slow.converged and slow.negative_curvature_steps == 0
+    assert slow.negative_curvature_steps == 0
     fast = emu.Solver(s, "fem", max_iterations=150).solve(act)
     assert fast.converged and fast.iterations < 100 and fast.negative_curvature_steps >= 1
     solver = emu.Solver(s, "fem")
     load = solver.load_case(act)
     _, H = solver._core.reduced_system(load, fast.positions, True)
     assert np.linalg.eigvalsh(H)[0] > 0                      # a minimum, not a saddle
-    # the saddle: where the slow run sat, |g| / |g0| ~ 3e-6, at iteration 100
-    saddle = np.asarray(slow.history["energy"])[100]
+    # the saddle: where the slow run ended (converged there or not)
+    saddle = slow.energy
     assert fast.energy < saddle - 1e-3 * abs(saddle)
-    _, Hs = solver._core.reduced_system(load, emu.Solver(s, "fem", max_iterations=100, negative_curvature=False)
-                                        .solve(act).positions, True)
+    _, Hs = solver._core.reduced_system(load, slow.positions, True)
     assert np.linalg.eigvalsh(Hs)[0] < 0                     # ... and it is one

@@ -1,0 +1,52 @@
+"""The solvers store a scene's tets along a Z-order curve (emu.lowering.model_tet_order,
+docs/DESIGN.md "Tet order"): an internal order that no answer depends on."""
+import copy
+
+import numpy as np
+
+import emu
+from emu.lowering import build_model, model_tet_order
+
+
+def with_tets_permuted(scene, perm):
+    """The same scene with its tets listed in the order perm (new tet i = old tet perm[i])."""
+    s = copy.deepcopy(scene)
+    inverse = np.empty_like(perm)
+    inverse[perm] = np.arange(len(perm))
+    s.tets = scene.tets[perm]
+    s._owner = scene._owner[perm]
+    for p in s.parts.values():
+        p.tets = inverse[p.tets]   # a part's fibres stay aligned with its list of tets
+    return s
+
+
+def test_order_is_a_permutation_of_the_model_tets_and_local():
+    s = emu.scenes.arm(2)
+    order = model_tet_order(s)
+    np.testing.assert_array_equal(np.sort(order), np.sort(s.model_tets))
+    shuffled = with_tets_permuted(s, np.random.default_rng(1).permutation(len(s.tets)))
+    c = shuffled.points[shuffled.tets].mean(axis=1)
+    given = np.linalg.norm(np.diff(c[shuffled.model_tets], axis=0), axis=1).mean()
+    ordered = np.linalg.norm(np.diff(c[model_tet_order(shuffled)], axis=0), axis=1).mean()
+    assert ordered < 0.3 * given   # consecutive tets are neighbours, not random ones
+    model = build_model(shuffled)
+    np.testing.assert_array_equal(np.asarray(model.tets), shuffled.tets[model_tet_order(shuffled)])
+
+
+def test_answers_do_not_depend_on_the_order_of_the_tets():
+    """A scene and the same scene with its tets shuffled: FEM's positions, EMU's
+    positions and EMU's per-tet F (returned in the scene's order) agree, and a
+    warm start from one solves the other at once."""
+    s = emu.scenes.arm(1)
+    perm = np.random.default_rng(2).permutation(len(s.tets))
+    t = with_tets_permuted(s, perm)
+    act = {"flexor": 0.4}
+    for method in ("fem", "emu"):
+        a = emu.Solver(s, method, alpha=300).solve(act, normalized=True)
+        b = emu.Solver(t, method, alpha=300).solve(act, normalized=True)
+        assert a.converged and b.converged
+        assert emu.vertex_error(a, b) < 1e-6
+        if method == "emu":
+            np.testing.assert_allclose(b.F, a.F[perm], atol=1e-5)
+            again = emu.Solver(t, "emu", alpha=300).solve(act, normalized=True, initial=a.F[perm])
+            assert again.iterations <= 1 and emu.vertex_error(again, a) < 1e-6
