@@ -198,8 +198,11 @@ def check_movable_bones(points: np.ndarray, bones: dict, held: np.ndarray):
     held    (p,) ids of the vertices the solve holds fixed (pins, fixed bones)
     """
     diag = bbox_diagonal(points)
+    is_held = np.zeros(len(points), bool)
+    is_held[np.asarray(held, np.int64)] = True
     for name, verts in bones.items():
-        on = np.intersect1d(verts, held)
+        verts = np.asarray(verts, np.int64)
+        on = np.unique(verts[is_held[verts]])   # the bone's held vertices, sorted (as intersect1d gave)
         if len(on) < 3:
             continue
         X = points[on] - points[on[0]]

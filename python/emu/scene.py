@@ -335,10 +335,15 @@ class Scene:
             elif a in piece or b in piece:
                 anchors.append(piece[a] if a in piece else piece[b])
         check_anchored(len(self.points), self.tets[soft], pins, links, anchors)
-        check_movable_bones(self.points, {n: np.unique(self.tets[self.parts[n].tets].ravel())
-                                          for n in self.movable_bones}, pins)
+        check_movable_bones(self.points, {n: self._vertices_of(self.parts[n].tets) for n in self.movable_bones}, pins)
         if not np.all(np.isfinite(self.gravity)) or np.shape(self.gravity) != (3,):
             raise ValueError(f"gravity must be a finite 3-vector, got {self.gravity!r}")
+
+    def _vertices_of(self, tet_ids) -> np.ndarray:
+        """Sorted ids of the vertices of the given tets (a mask: np.unique sorts, 10x slower)."""
+        mask = np.zeros(len(self.points), bool)
+        mask[self.tets[tet_ids].ravel()] = True
+        return np.flatnonzero(mask)
 
     def acap_weight_of(self, part: Part) -> float:
         """The ACAP weight of a part (tendons without an explicit weight: default_tendon_weight)."""
