@@ -125,6 +125,21 @@ TEST(spatial_order_is_a_stable_permutation_along_the_z_curve) {
   }
   CHECK(threw);
   CHECK(spatial_order(m.rest, Eigen::MatrixX4i(0, 4)).empty());
+  // The curve itself: eight "tets" collapsed onto the corners of a cube, listed
+  // in a scrambled order, come out x fastest, then y, then z (the Morton code
+  // interleaves the bits of x, y, z in that order).
+  Eigen::MatrixX3d corners(8, 3);
+  const int scrambled[8] = {6, 1, 7, 4, 0, 3, 5, 2};  // the corner at row k is corner scrambled[k]
+  for (int k = 0; k < 8; ++k) {
+    const int i = scrambled[k];
+    corners.row(k) << (i & 1), (i >> 1) & 1, (i >> 2) & 1;
+  }
+  Eigen::MatrixX4i at_corner(8, 4);
+  for (int k = 0; k < 8; ++k) at_corner.row(k).setConstant(k);
+  const std::vector<int> cube = spatial_order(corners, at_corner);
+  bool curve = cube.size() == 8;
+  for (int i = 0; i < 8 && curve; ++i) curve = scrambled[cube[i]] == i;
+  CHECK(curve);
 }
 
 TEST(fem_gradient_matches_energy_and_solve_converges) {

@@ -27,12 +27,12 @@ std::vector<int> spatial_order(const Eigen::MatrixX3d& X, const Eigen::MatrixX4i
   if (m == 0) return order;
   const Eigen::RowVector3d lo = c.colwise().minCoeff();
   const double extent = (c.colwise().maxCoeff() - lo).maxCoeff();
-  const double scale = extent > 0 ? 1024.0 / extent : 0.0;
   std::vector<uint32_t> code(m);
   for (Eigen::Index t = 0; t < m; ++t) {
     uint32_t key = 0;
     for (int d = 0; d < 3; ++d) {
-      const double q = std::min((c(t, d) - lo(d)) * scale, 1023.0);
+      // (c - lo) / extent lies in [0, 1]: no overflow for any extent
+      const double q = extent > 0 ? std::min((c(t, d) - lo(d)) / extent * 1024.0, 1023.0) : 0.0;
       key |= spread_bits(static_cast<uint32_t>(q)) << d;
     }
     code[t] = key;

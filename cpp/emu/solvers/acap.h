@@ -111,7 +111,8 @@ class AcapOperator {
  private:
   void solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h, Eigen::MatrixXd& Z) const;
   void setup_bones();
-  /// apply_C with D_t = target(t) (a Mat3, or a map of 9 doubles in column order).
+  /// apply_C with D_t = target(t): a Mat3 or a Map of 9 doubles in column
+  /// order, never a lazy expression (it is held with auto per tet).
   template <class TargetOf>
   void apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const;
 
