@@ -316,6 +316,16 @@ TEST(acap_rigid_tets_keep_c_and_ct_adjoint) {
   for (Eigen::Index t = 0; t < nt; ++t)
     worst = std::max(worst, (CTu.col(t) - acap.weight_volume()(t) * F.col(t)).norm());
   CHECK(worst <= 1e-12 * CTu.norm());
+  // C of the unknowns (a bone's own rigid tets summed per bone, the soft
+  // rigid tet on its own) equals C of the unknowns expanded per tet.
+  Mat9X U(9, layout.num_unknowns), per_tet(9, nt);
+  for (Eigen::Index i = 0; i < U.size(); ++i) U.data()[i] = n(rng);
+  for (Eigen::Index t = 0; t < nt; ++t) per_tet.col(t) = U.col(layout.tet_unknown(t));
+  Eigen::MatrixX3d RU, Rt;
+  acap.apply_C_of_unknowns(U, RU);
+  acap.apply_C(per_tet, Rt);
+  CHECK((RU - Rt).norm() <= 1e-12 * Rt.norm());
+  CHECK(layout.tet_unknown(soft_rigid) < layout.num_soft);  // the other kind is there too
 }
 
 

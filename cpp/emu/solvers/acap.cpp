@@ -114,6 +114,18 @@ void AcapOperator::setup_bones() {
     rigid_tets_.push_back(static_cast<int>(t));
     rigid_tet_bone_.push_back(b);
   }
+  rigid_own_wv_ = Eigen::VectorXd::Zero(layout_.num_bones);
+  rigid_own_tets_.assign(layout_.num_bones, -1);
+  for (size_t i = 0; i < rigid_tets_.size(); ++i) {
+    const int t = rigid_tets_[i], b = rigid_tet_bone_[i];
+    if (layout_.tet_unknown(t) == layout_.num_soft + b) {
+      rigid_own_wv_(b) += wv_(t);
+      rigid_own_tets_[b] = t;
+    } else {
+      rigid_other_tets_.push_back(t);
+      rigid_other_bone_.push_back(b);
+    }
+  }
   for (Eigen::Index t = 0; t < m; ++t)
     for (int a = 0; a < 4; ++a) {
       const int v = model_.tets(t, a);
@@ -238,7 +250,7 @@ void corner_targets(const Eigen::VectorXd& wv, const UnknownLayout& layout, Targ
 }  // namespace
 
 template <class TargetOf>
-void AcapOperator::apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const {
+void AcapOperator::apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R, bool by_unknowns) const {
   corner_targets(wv_, layout_, target, is_rigid_, corner_.data());
   pattern_->gather(corner_.data(), 3, rhs_rows_.data());
   R.resize(dofs(), 3);
@@ -248,9 +260,21 @@ void AcapOperator::apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const {
   for (size_t i = 0; i < bone_corner_.size(); ++i)  // fixed order: reproducible
     R.block<4, 3>(ns_ + 4 * bone_corner_bone_[i], 0).noalias() +=
         bone_corner_phi_.col(i) * Eigen::Map<const Vec3>(corner_.data() + 3 * bone_corner_[i]).transpose();
-  for (size_t i = 0; i < rigid_tets_.size(); ++i) {  // w V [T^T; 0] each (acap.h)
-    const int t = rigid_tets_[i];
-    R.block<3, 3>(ns_ + 4 * rigid_tet_bone_[i], 0).noalias() += wv_(t) * target(t).transpose();
+  if (!by_unknowns) {
+    for (size_t i = 0; i < rigid_tets_.size(); ++i) {  // w V [T^T; 0] each (acap.h)
+      const int t = rigid_tets_[i];
+      R.block<3, 3>(ns_ + 4 * rigid_tet_bone_[i], 0).noalias() += wv_(t) * target(t).transpose();
+    }
+    return;
+  }
+  for (int b = 0; b < layout_.num_bones; ++b) {  // a bone's own rigid tets: (sum w V) T_b^T
+    if (rigid_own_wv_(b) == 0) continue;
+    const int t = rigid_own_tets_[b];  // any of them: they share the bone's unknown
+    R.block<3, 3>(ns_ + 4 * b, 0).noalias() += rigid_own_wv_(b) * target(t).transpose();
+  }
+  for (size_t i = 0; i < rigid_other_tets_.size(); ++i) {
+    const int t = rigid_other_tets_[i];
+    R.block<3, 3>(ns_ + 4 * rigid_other_bone_[i], 0).noalias() += wv_(t) * target(t).transpose();
   }
 }
 
@@ -263,7 +287,8 @@ void AcapOperator::apply_C_of_unknowns(const Mat9X& U, Eigen::MatrixX3d& R) cons
     apply_C(U, R);
     return;
   }
-  apply_C_with([&](Eigen::Index t) { return Eigen::Map<const Mat3>(U.col(layout_.tet_unknown(t)).data()); }, R);
+  apply_C_with([&](Eigen::Index t) { return Eigen::Map<const Mat3>(U.col(layout_.tet_unknown(t)).data()); }, R,
+               true);
 }
 
 void AcapOperator::fit_of_unknowns(const Mat9X& U, Eigen::MatrixX3d& x) const {

@@ -113,8 +113,10 @@ class AcapOperator {
   void setup_bones();
   /// apply_C with D_t = target(t): a Mat3 or a Map of 9 doubles in column
   /// order, never a lazy expression (it is held with auto per tet).
+  /// by_unknowns: target(t) is the unknown of tet t (apply_C_of_unknowns),
+  /// so a bone's own rigid tets share their bone's target.
   template <class TargetOf>
-  void apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R) const;
+  void apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R, bool by_unknowns = false) const;
 
   bool rounded_ = false;  // single_precision: every factor solve with the rounded copy
   const Model& model_;
@@ -133,6 +135,14 @@ class AcapOperator {
   // u_b's top three rows transposed: no per-corner work (a fifth of arm_r5's tets).
   std::vector<int> rigid_tets_, rigid_tet_bone_;
   std::vector<char> is_rigid_;  // #T with bones, else empty
+  // Of the rigid tets, those whose unknown is their bone's own (the bone's
+  // tets, not tissue held between its vertices) add the same T to their
+  // bone's rows: apply_C_of_unknowns adds them at once, (sum w V) T_b^T per
+  // bone (a serial loop over every such tet was a tenth of a CG iteration
+  // on the demo's scene at two threads).
+  Eigen::VectorXd rigid_own_wv_;                      // per bone: sum of w V over its own rigid tets
+  std::vector<int> rigid_own_tets_;                   // per bone: one of them (-1: none)
+  std::vector<int> rigid_other_tets_, rigid_other_bone_;  // the other rigid tets and their bones
   Eigen::Matrix<double, 4, Eigen::Dynamic> bone_corner_phi_;
   Eigen::MatrixXd W_;            // num_free x nq: L_ss^-1 L_sb
   Eigen::MatrixXd Sb_;           // nq x nq bone Schur complement
