@@ -8,6 +8,7 @@ import pytest
 
 import emu
 from emu.joints import Joint
+from emu.geometry import tet_vertices
 from emu.lowering import build_model, model_tet_order, tet_fibers
 
 from conftest import bone_muscle_bone, gap_scene
@@ -182,3 +183,10 @@ def test_connected_components_match_an_independent_graph_search():
             assert np.all(labels[members] == members.min())
     with pytest.raises(ValueError, match="outside"):
         emu.checks.connected_components(4, np.array([[0, 1, 2, 4]]))
+
+
+def test_tet_vertices_are_the_sorted_unique_ids():
+    rng = np.random.default_rng(3)
+    tets = rng.integers(0, 50, (40, 4))
+    np.testing.assert_array_equal(tet_vertices(tets, 60), np.unique(tets.ravel()))
+    assert tet_vertices(tets[:0], 60).size == 0

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from .geometry import bbox_diagonal
+from .geometry import bbox_diagonal, tet_vertices
 
 __all__ = ["BoneMotion", "rigid_fit", "bone_motion", "signed_angle", "bone_angle"]
 
@@ -42,7 +42,7 @@ def bone_motion(scene, positions, bone: str) -> BoneMotion:
         bones = [p.name for p in scene.parts.values() if p.kind == "bone"]
         raise ValueError(f"no bone named {bone!r} (bones: {', '.join(bones) or 'none'})")
     P = np.asarray(getattr(positions, "positions", positions))
-    v = np.unique(scene.tets[part.tets].ravel())
+    v = tet_vertices(scene.tets[part.tets], len(scene.points))
     X, Y = scene.points[v], P[v]
     R, t = rigid_fit(X, Y)
     diag = bbox_diagonal(X)

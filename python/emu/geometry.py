@@ -6,7 +6,15 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["error_history", "time_to_error", "time_within", "bbox_diagonal", "vertex_error", "deformation_gradients",
-           "boundary_faces"]
+           "boundary_faces", "tet_vertices"]
+
+
+def tet_vertices(tets, num_vertices: int) -> np.ndarray:
+    """Sorted ids of the vertices of ``tets`` (k, 4) ids in [0, num_vertices):
+    np.unique of them, by a mask (np.unique sorts: 10x slower on a bone's tets)."""
+    mask = np.zeros(num_vertices, bool)
+    mask[np.asarray(tets).ravel()] = True
+    return np.flatnonzero(mask)
 
 
 def bbox_diagonal(points) -> float:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .geometry import bbox_diagonal
+from .geometry import bbox_diagonal, tet_vertices
 
 __all__ = ["Joint", "JOINT_KINDS", "joint_kind", "detect_joints", "declare_joint"]
 
@@ -61,7 +61,7 @@ def detect_joints(points: np.ndarray, tets: np.ndarray, bones: dict) -> list:
     Returns one Joint per pair of bones that share at least one vertex.
     """
     names = list(bones)
-    verts = {name: np.unique(tets[bones[name]].ravel()) for name in names}
+    verts = {name: tet_vertices(tets[bones[name]], len(points)) for name in names}
     diag = bbox_diagonal(points)
     out = []
     for i, a in enumerate(names):

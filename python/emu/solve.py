@@ -11,7 +11,7 @@ import numpy as np
 from . import _core
 from .checks import inverted_tets
 from .contact import ContactTerm
-from .geometry import bbox_diagonal, vertex_error
+from .geometry import bbox_diagonal, tet_vertices, vertex_error
 from .lowering import build_model, declared_joint_rows, declared_joint_world, model_tet_order
 from .poses import parse_pose
 from .runtime import set_threads
@@ -486,7 +486,7 @@ class Solver:
 
         targets = targets.copy()
         for name in poses:
-            verts = np.unique(self.scene.tets[bones[name].tets].ravel())
+            verts = tet_vertices(self.scene.tets[bones[name].tets], len(self.scene.points))
             targets[np.searchsorted(ids, verts)] = placed(name, self.scene.points[verts])
         # a vertex shared by two bones (a joint) must land in the same place under both poses
         diag = bbox_diagonal(self.scene.points)

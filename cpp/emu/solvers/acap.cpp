@@ -260,22 +260,17 @@ void AcapOperator::apply_C_with(TargetOf&& target, Eigen::MatrixX3d& R, bool by_
   for (size_t i = 0; i < bone_corner_.size(); ++i)  // fixed order: reproducible
     R.block<4, 3>(ns_ + 4 * bone_corner_bone_[i], 0).noalias() +=
         bone_corner_phi_.col(i) * Eigen::Map<const Vec3>(corner_.data() + 3 * bone_corner_[i]).transpose();
-  if (!by_unknowns) {
-    for (size_t i = 0; i < rigid_tets_.size(); ++i) {  // w V [T^T; 0] each (acap.h)
-      const int t = rigid_tets_[i];
-      R.block<3, 3>(ns_ + 4 * rigid_tet_bone_[i], 0).noalias() += wv_(t) * target(t).transpose();
+  if (by_unknowns)
+    for (int b = 0; b < layout_.num_bones; ++b) {  // a bone's own rigid tets: (sum w V) T_b^T
+      if (rigid_own_wv_(b) == 0) continue;
+      const int t = rigid_own_tets_[b];  // any of them: they share the bone's unknown
+      R.block<3, 3>(ns_ + 4 * b, 0).noalias() += rigid_own_wv_(b) * target(t).transpose();
     }
-    return;
-  }
-  for (int b = 0; b < layout_.num_bones; ++b) {  // a bone's own rigid tets: (sum w V) T_b^T
-    if (rigid_own_wv_(b) == 0) continue;
-    const int t = rigid_own_tets_[b];  // any of them: they share the bone's unknown
-    R.block<3, 3>(ns_ + 4 * b, 0).noalias() += rigid_own_wv_(b) * target(t).transpose();
-  }
-  for (size_t i = 0; i < rigid_other_tets_.size(); ++i) {
-    const int t = rigid_other_tets_[i];
-    R.block<3, 3>(ns_ + 4 * rigid_other_bone_[i], 0).noalias() += wv_(t) * target(t).transpose();
-  }
+  // the other rigid tets (all of them unless by_unknowns): w V [T^T; 0] each (acap.h)
+  const std::vector<int>& tets = by_unknowns ? rigid_other_tets_ : rigid_tets_;
+  const std::vector<int>& bones = by_unknowns ? rigid_other_bone_ : rigid_tet_bone_;
+  for (size_t i = 0; i < tets.size(); ++i)
+    R.block<3, 3>(ns_ + 4 * bones[i], 0).noalias() += wv_(tets[i]) * target(tets[i]).transpose();
 }
 
 void AcapOperator::apply_C(const Mat9X& D, Eigen::MatrixX3d& R) const {
