@@ -251,3 +251,55 @@ def test_a_correction_in_a_soft_valley_is_not_taken_for_converged():
     true = emu.vertex_error(sol, ref)
     assert true < 0.01
     assert 0.5 * true <= sol.error_estimate <= 2 * true, (sol.corrected, sol.error_estimate, true)
+
+
+def _estimate_stand_in(solver, estimate):
+    """Replaces the solver's error estimate by a set one: x1 = the answer with
+    vertex 0 moved along x by estimate() of the diagonal (called once per solve)."""
+    from emu.geometry import bbox_diagonal
+    diag = bbox_diagonal(solver.scene.points)
+
+    def fem_correction_of(load, positions):
+        x1 = positions.copy()
+        x1[0, 0] += estimate() * diag
+        return x1, 0.0, ""
+    solver._fem_correction_of = fem_correction_of
+
+
+def test_alpha_is_not_raised_where_raising_does_not_lower_the_estimate():
+    """An estimate that stays at 2% whatever alpha (the error is not alpha's:
+    a loose stopping point, a different inverted equilibrium): one re-solve
+    at a larger alpha, then no more raises, the warning says so, and the
+    next solve starts at the alpha this one started at. Before, each solve
+    multiplied alpha by the retries' factors (8.5^4 here) and carried it on."""
+    from emu.solve import AccuracyWarning
+    solver = emu.Solver(fusiform(1, warn=False), "emu", alpha=100.0, accuracy=0.01, fem_correction=False)
+    _estimate_stand_in(solver, lambda: 0.02)
+    for frame in range(3):
+        with pytest.warns(AccuracyWarning, match="raising alpha did not lower it"):
+            sol = solver.solve({"belly": 1e4})
+        assert sol.settings["alpha_attempts"] == 2 and not sol.accuracy_reached
+        assert sol.settings["alpha"] > 100.0 and solver.alpha == 100.0
+
+
+def test_the_alpha_carried_to_the_next_solve_is_bounded():
+    """An estimate that falls by a fifth with every re-solve but starts each
+    solve (a sequence's frame) at 2% again: five solves per frame, alpha
+    raised about 1000x and carried over; what the next solve starts at stays
+    within ALPHA_MAX_RATIO x the alpha given (1e6 mu here) instead of
+    growing from frame to frame (1e5, 1e8, ... before)."""
+    from emu.solve import ALPHA_MAX_RATIO
+    solver = emu.Solver(fusiform(1, warn=False), "emu", alpha=100.0, accuracy=0.01, fem_correction=False)
+    calls = [0]
+
+    def estimate():
+        calls[0] += 1
+        return 0.02 * 0.8 ** (calls[0] - 1)
+    _estimate_stand_in(solver, estimate)
+    starts = []
+    for frame in range(3):
+        calls[0] = 0
+        starts.append(solver.alpha)
+        sol = solver.solve({"belly": 1e4})   # 0.02 x 0.8^4: within the accuracy, above 0.6 of it
+        assert sol.settings["alpha_attempts"] == 5 and solver.alpha <= ALPHA_MAX_RATIO * 100.0
+    assert starts[1] > 1e4 and starts[2] == ALPHA_MAX_RATIO * 100.0 and solver.alpha == starts[2]

@@ -60,6 +60,18 @@ STEP_GRAD = 1e-2
 # the step test begins to apply, sqrt(STEP_GRAD) (an answer to an accuracy
 # needs no superlinear endgame; measured: docs/DESIGN.md, "Accuracy as the knob")
 ACCURACY_CG_FORCING_MIN = math.sqrt(STEP_GRAD)
+# The alpha rule assumes EMU's error is alpha's (error ~ alpha^-p, p >= 0.3
+# measured). A re-solve at a larger alpha whose estimate is still above
+# RESOLVE_GAIN x the estimate before it shows the error is something else
+# (the stopping point, a different inverted equilibrium): the retries stop and
+# the next solve starts at the alpha this one started at (with FEM
+# corrections on, the retries go on: a larger alpha can bring EMU's answer
+# within their reach). The alpha a solve leaves for the next never exceeds
+# ALPHA_MAX_RATIO x max(the alpha given, DEFAULT_ALPHA) (within a solve the
+# retries' factors bound it). Without either, such a sequence multiplied
+# alpha by up to 30 per retry and per frame (docs/DESIGN.md, "Accuracy as the
+# knob": 4e39 mu by the 24th frame).
+RESOLVE_GAIN, ALPHA_MAX_RATIO = 0.9, 1e4
 # EMU's strict solves (no accuracy) also stop when a full step moves no vertex
 # by more than POSITION_TOL x the bounding-box diagonal, once |g| <=
 # POSITION_TOL_GRAD |g_0|: with bones the gradient's round-off (the fit's
@@ -261,7 +273,11 @@ class Solver:
                   of it; EMU also picks alpha (starting from ``alpha``) so that
                   its error estimate is within 0.6 x accuracy, re-solving
                   warm-started at a larger alpha when it is not, and carries
-                  the alpha over to the next solve (``solver.alpha``)
+                  the alpha over to the next solve (``solver.alpha``); a re-solve
+                  that does not lower the estimate is not carried over (the next
+                  solve starts where this one did; without ``fem_correction`` it
+                  ends the raises), and the alpha carried over is at most
+                  1e4 x max(alpha, 100)
 
     step_fraction  with ``accuracy``: stop when a full step moves no vertex by more than
                   this fraction of it (0.1; 0.3 with EMU's FEM correction is faster on
@@ -323,6 +339,7 @@ class Solver:
         self.scene, self.method, self.step = scene, method, step
         self.accuracy = None if accuracy is None else float(accuracy)
         self.alpha = float(alpha)
+        self._alpha_max = ALPHA_MAX_RATIO * max(self.alpha, DEFAULT_ALPHA)   # automatic raises stop there
         self._model_tets = model_tet_order(scene)  # the scene's tet of each model tet
         self.model = build_model(scene, tet_order=self._model_tets)
         self.fibers = np.zeros((len(scene.tets), 3))
@@ -569,8 +586,11 @@ class Solver:
         total_s, estimate_s, attempts = sol.time_s, sol.error_estimate_time_s, 1
         iterations, cg, histories = sol.iterations, sol.cg_iterations, [sol.history]
         phases = dict(sol.phase_times)
+        alpha_start, highest, before = self.alpha, self.alpha, None   # before: the estimate before a re-solve
+        stalled = False   # a re-solve at a larger alpha did not lower the estimate
         while sol.converged and sol.error_estimate is not None and sol.error_estimate > ACCEPT * target:
             own = sol.error_estimate   # a correction replaces it with its last step's length
+            stalled = before is not None and own > RESOLVE_GAIN * before
             t0 = time.perf_counter()
             corrected, closer = self._correct(load, sol, target) if self.fem_correction else (False, None)
             estimate_s += time.perf_counter() - t0   # the correction counts as estimation time
@@ -582,14 +602,24 @@ class Solver:
             if corrected:
                 # this answer is FEM-corrected; the next solve (a sequence's next
                 # frame) starts at the alpha a re-solve would have used, so that
-                # EMU's own answers stay near the target and corrections the exception
-                self.set_alpha(self.alpha * factor)
+                # EMU's own answers stay near the target and corrections the
+                # exception (where raising alpha has not helped, at the alpha
+                # this solve started at)
+                self.set_alpha(alpha_start if stalled else min(self.alpha * factor, self._alpha_max))
                 if iterates is not None:   # the corrected answer, when it exists: after the estimates
                     iterates.append((total_s + estimate_s, sol.positions))
                 break
-            if attempts >= MAX_ALPHA_ATTEMPTS:
+            # the error is not alpha's: without corrections no more raises (with
+            # them a larger alpha can still bring EMU's answer within reach of
+            # FEM's Newton steps: the stress test at activation 1e10), and none
+            # carried over to the next solve
+            if (stalled and not self.fem_correction) or attempts >= MAX_ALPHA_ATTEMPTS:
+                if stalled:
+                    self.set_alpha(alpha_start)
                 break
+            before = own
             self.set_alpha(self.alpha * factor)
+            highest = self.alpha
             # a warm start at a larger alpha: CG to the tight forcing term, so
             # that the step test sees Newton steps (docs/DESIGN.md)
             eta_max = self._core.cg_forcing_max
@@ -618,12 +648,16 @@ class Solver:
                 # FEM find different inverted equilibria (docs/stability.md)
                 sol.error_estimate_note = f"accuracy {target:g} not reached: the error estimate is " \
                     f"{sol.error_estimate:.2g}" + (
-                        f" after {attempts} alpha(s), up to alpha = {self.alpha:.3g} mu; use method='fem' for "
-                        "this load" if sol.converged else f" where the solve stopped ({sol.status})")
+                        f" after {attempts} alpha(s), up to alpha = {highest:.3g} mu" +
+                        ("; raising alpha did not lower it" if stalled else "") +
+                        "; use method='fem' for this load" if sol.converged
+                        else f" where the solve stopped ({sol.status})")
                 if sol.converged:   # a solve that stopped early says so in its status already
                     warnings.warn(AccuracyWarning(sol.error_estimate_note), stacklevel=2)
         if sol.error_estimate is not None and sol.error_estimate < AIM * target and not sol.corrected:
             self.set_alpha(max(self.alpha * 0.5, self.alpha * sol.error_estimate / (AIM * target)))
+        if self.alpha > self._alpha_max:   # what the next solve starts at stays bounded
+            self.set_alpha(self._alpha_max)
         return sol
 
     def _correct(self, load, sol: Solution, target: float) -> tuple:
