@@ -179,3 +179,13 @@ def test_accuracy_variants_small():
         assert float(rows["fusiform_r3"][-2]) < 0.01   # the true error within the accuracy
         newton, cg = map(int, rows["demo (4 frames)"][2].split("/"))
         assert newton > 0 and cg >= newton
+
+
+def test_targets_small():
+    out = run(BENCH / "targets.py", "--scenes", "fusiform_r3", "arm_r3", "--alphas", "100", "300")
+    rows = {line.split("|")[1].strip(): line for line in out.splitlines() if line.startswith("| fusiform_r3")
+            or line.startswith("| arm_r3")}
+    assert set(rows) == {"fusiform_r3", "arm_r3"}
+    for line in rows.values():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        assert cells[5] == "3x" and float(cells[2]) > 0 and "mu," in cells[3]   # target, FEM's time, EMU's alpha

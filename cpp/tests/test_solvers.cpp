@@ -383,12 +383,14 @@ TEST(bone_coarse_space_matches_the_dense_balancing_preconditioner) {
   for (int b = 0; b < nb; ++b)
     F.col(ns + b) = flatten(Eigen::AngleAxisd(0.3 + b, Vec3(1, 2, 3 - b).normalized()).toRotationMatrix());
   std::vector<Mat9X> turns;
-  auto turn = [&](int b, const Mat3& M, Mat9X& Z, Mat9X& HZ) {
-    Z = Mat9X::Zero(9, nu);
-    for (int u = 0; u < ns; ++u) Z.col(u) = flatten(Mat3(M * unflatten(follow[b].col(u))));
-    Z.col(ns + b) = flatten(M);
-    hprod(Z, HZ);
-    turns.push_back(Z);
+  auto turn = [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
+    for (int k = 0; k < 3; ++k) {
+      Z[k] = Mat9X::Zero(9, nu);
+      for (int u = 0; u < ns; ++u) Z[k].col(u) = flatten(Mat3(M[k] * unflatten(follow[b].col(u))));
+      Z[k].col(ns + b) = flatten(M[k]);
+      hprod(Z[k], HZ[k]);
+      turns.push_back(Z[k]);
+    }
   };
   Mat9X extra(9, nu), r(9, nu);
   for (Eigen::Index i = 0; i < extra.size(); ++i) extra.data()[i] = g(rng);

@@ -19,14 +19,21 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
     throw std::logic_error("BoneCoarseSpace: one follow field per movable bone expected");
   std::vector<Mat9X> Z(nz), HZ(nz);
   turn_.resize(3 * nb);
-  for (int b = 0; b < nb; ++b)
+  for (int b = 0; b < nb; ++b) {
+    std::array<Mat3, 3> M;
     for (int k = 0; k < 3; ++k) {
       Mat3 W = Mat3::Zero();  // [e_k]_x
       W((k + 2) % 3, (k + 1) % 3) = 1.0;
       W((k + 1) % 3, (k + 2) % 3) = -1.0;
-      turn_[3 * b + k] = W * unflatten(F.col(layout_.num_soft + b));
-      turn(b, turn_[3 * b + k], Z[3 * b + k], HZ[3 * b + k]);
+      M[k] = turn_[3 * b + k] = W * unflatten(F.col(layout_.num_soft + b));
     }
+    std::array<Mat9X, 3> Zb, HZb;
+    turn(b, M, Zb, HZb);
+    for (int k = 0; k < 3; ++k) {
+      Z[3 * b + k] = std::move(Zb[k]);
+      HZ[3 * b + k] = std::move(HZb[k]);
+    }
+  }
   for (size_t e = 0; e < extra.size(); ++e) {
     Z[3 * nb + e] = extra[e];
     product(Z[3 * nb + e], HZ[3 * nb + e]);

@@ -25,6 +25,7 @@
 // part of Z^T H Z is used. A direction of zero curvature, measured against the
 // curvature 2 alpha sum_t V_t of turning the bone's volume against an ACAP term
 // of weight 1, is a neutral mode: left out and reported.
+#include <array>
 #include <functional>
 #include <vector>
 
@@ -40,14 +41,15 @@ namespace emu {
 class BoneCoarseSpace {
  public:
   using Product = std::function<void(const Mat9X&, Mat9X&)>;
-  /// turn(b, M, Z, HZ): Z (9 x #unknowns) = bone b turned by the tangent M
-  /// with the soft F_t of the turn's fitted positions (other bones 0), and
-  /// HZ = H Z (EmuSolver::bone_turn_into: from the unit turn's fits).
-  using Turn = std::function<void(int, const Mat3&, Mat9X&, Mat9X&)>;
+  /// turns(b, M, Z, HZ): for each of bone b's three tangents M[k], Z[k] (9 x
+  /// #unknowns) = bone b turned by M[k] with the soft F_t of the turn's fitted
+  /// positions (other bones 0), and HZ[k] = H Z[k] (EmuSolver::bone_turns_into:
+  /// from the unit turn's fits, the three in one pass over H's blocks).
+  using Turn = std::function<void(int, const std::array<Mat3, 3>&, std::array<Mat9X, 3>&, std::array<Mat9X, 3>&)>;
 
   /// follow: per movable bone, Phi_b on the soft unknowns (9 x #soft; the
-  /// unit turn's F_t), which every turn(b, M, ...) of build must follow: Z =
-  /// M Phi_b (above). Kept by pointer: it must outlive the coarse space.
+  /// unit turn's F_t), which every turn of build must follow: Z[k] = M[k]
+  /// Phi_b (above). Kept by pointer: it must outlive the coarse space.
   BoneCoarseSpace(const UnknownLayout& layout, double alpha, std::vector<const Mat9X*> follow);
 
   /// Rebuild at F (9 x #unknowns; bone columns rotations) with H's product;

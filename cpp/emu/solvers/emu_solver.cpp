@@ -340,6 +340,45 @@ void EmuSolver::bone_turn_into(int b, const Mat3& M, Mat9X& Z, Mat9X& Fd) const 
   for (Eigen::Index t = 0; t < m; ++t) Fd.col(t) = flatten(Mat3(M * unflatten(f.fit.col(t))));
 }
 
+template <int N>
+void EmuSolver::bone_turns_into(const std::vector<Mat9>& A, int b, const std::array<Mat3, N>& M,
+                                std::array<Mat9X, N>& Z, std::array<Mat9X, N>& HZ) const {
+  // bone_turn_into then hessian_product_from_fit, per turn k: on a soft
+  // unknown u (tet t) Z_k = vec(M_k Phi_u), H Z_k = A_u Z_k - alpha w V
+  // vec(M_k fit_t); the N turns in one loop, so each block A_u comes from
+  // memory once. Each product is the per-turn path's (a 9x9 times 9x3 lazy
+  // product rounds differently), so the two give the same bits.
+  const UnitTurnFits& f = turn_fits_[b];
+  const auto& wv = acap_->weight_volume();
+  const double alpha = emu_.alpha;
+  const int ns = layout_.num_soft, nu = layout_.num_unknowns;
+  for (int k = 0; k < N; ++k) {
+    Z[k].resize(9, nu);
+    HZ[k].resize(9, nu);
+  }
+#pragma omp parallel for schedule(static)
+  for (int u = 0; u < ns; ++u) {
+    const int t = layout_.unknown_tets[layout_.unknown_ptr[u]];
+    const Eigen::Map<const Mat3> follow(f.follow.col(u).data()), fit(f.fit.col(t).data());
+    for (int k = 0; k < N; ++k) {
+      const Vec9 z = flatten(Mat3(M[k] * follow));
+      Z[k].col(u) = z;
+      HZ[k].col(u) = A[u].lazyProduct(z) - (alpha * wv(t)) * flatten(Mat3(M[k] * fit));
+    }
+  }
+  for (int u = ns; u < nu; ++u) {  // bones: their own turn (b) or none; the fit's pull over their tets
+    for (int k = 0; k < N; ++k) {
+      Z[k].col(u) = u == ns + b ? flatten(M[k]) : Vec9::Zero();
+      Vec9 pull = Vec9::Zero();
+      for (int i = layout_.unknown_ptr[u]; i < layout_.unknown_ptr[u + 1]; ++i) {
+        const int t = layout_.unknown_tets[i];
+        pull += (alpha * wv(t)) * flatten(Mat3(M[k] * unflatten(f.fit.col(t))));
+      }
+      HZ[k].col(u) = A[u].lazyProduct(Z[k].col(u)) - pull;
+    }
+  }
+}
+
 std::pair<Eigen::MatrixXd, Eigen::MatrixXd> EmuSolver::bone_turn(const LoadCase& load, const Eigen::MatrixXd& Frows,
                                                                  int bone, const Eigen::Matrix3d& M,
                                                                  bool exact) const {
@@ -349,10 +388,9 @@ std::pair<Eigen::MatrixXd, Eigen::MatrixXd> EmuSolver::bone_turn(const LoadCase&
   const Context c = make_context(load);
   std::vector<Mat9> A, A_exact;
   blocks_into(c, to_cols(Frows), &A, &A_exact);
-  Mat9X Z, Fd, HZ;
-  bone_turn_into(bone, M, Z, Fd);
-  hessian_product_from_fit(exact ? A_exact : A, Z, Fd, HZ);
-  return {Z.transpose(), HZ.transpose()};
+  std::array<Mat9X, 1> Z, HZ;  // the coarse space's path (bone_turns_into), one turn
+  bone_turns_into<1>(exact ? A_exact : A, bone, {M}, Z, HZ);
+  return {Z[0].transpose(), HZ[0].transpose()};
 }
 
 Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
@@ -634,14 +672,16 @@ class EmuSolver::Newton {
       ScopedSeconds timer(time.preconditioner);
       coarse_.build(
           F_,
-          [&](int b, const Mat3& M, Mat9X& Z, Mat9X& HZ) {
-            s_.bone_turn_into(b, M, Z, Fd_);  // Z and its fit without a back-substitution
+          [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
             if (s_.has_contact() && Hc_.nonZeros()) {
-              product(Z, HZ);  // contact's term needs the fitted positions
+              for (int k = 0; k < 3; ++k) {
+                s_.bone_turn_into(b, M[k], Z[k], Fd_);  // Z without a back-substitution
+                product(Z[k], HZ[k]);                    // contact's term needs the fitted positions
+              }
               return;
             }
-            s_.hessian_product_from_fit(H, Z, Fd_, HZ);
-            s_.riemannian_columns(F_, g_, Z, exact, HZ);
+            s_.bone_turns_into<3>(H, b, M, Z, HZ);  // the three turns in one pass over H's blocks
+            for (int k = 0; k < 3; ++k) s_.riemannian_columns(F_, g_, Z[k], exact, HZ[k]);
           },
           product, recycled_);
     }

@@ -22,6 +22,7 @@
 //
 // Unknowns: one per soft tet (tet order), then one per bone; the diagnostic
 // functions take and return #unknowns by 9 arrays (= #T by 9 without bones).
+#include <array>
 #include <memory>
 
 #include <Eigen/SparseCore>
@@ -136,6 +137,12 @@ class EmuSolver {
   /// The turn of bone b by M with the soft tissue following (see bone_turn):
   /// Z (9 x #unknowns) and the F_t of its fit Fd (9 x #T), from turn_fits_.
   void bone_turn_into(int b, const Mat3& M, Mat9X& Z, Mat9X& Fd) const;
+  /// N turns of bone b at once, Z[k] and the Euclidean H Z[k] = A Z[k] - alpha
+  /// C^T K^-1 C Z[k] (hessian_product_from_fit of bone_turn_into's Z and Fd):
+  /// one pass over the blocks A for all N (the coarse space's rebuild, N = 3).
+  template <int N>
+  void bone_turns_into(const std::vector<Mat9>& A, int b, const std::array<Mat3, N>& M, std::array<Mat9X, N>& Z,
+                       std::array<Mat9X, N>& HZ) const;
   void fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const;
   void fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const;
   // Bones: tangent projection of the bone columns of v at F; F + s d retracted to rotations.
