@@ -94,28 +94,56 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
   if (rounded_) factor_.keep_single_precision_copy();  // before setup_bones: its solves use it too
   corner_.resize(m * 12);
   rhs_rows_.resize(ns_, 3);
-  if (nq_) setup_bones();
+  if (nq_) setup_bones(pattern_of);
   // Factorised once, solved two or three times per CG iteration with 3
   // right-hand sides: the factor stays supernodal, solved by
   // supernodal_solve_in_place (CholmodFactor::solve), which beats CHOLMOD's
   // simplicial solve on small meshes as well (docs/DESIGN.md).
 }
 
-void AcapOperator::setup_bones() {
+void AcapOperator::setup_bones(const AcapOperator* same_model) {
   const Eigen::Index m = model_.tets.rows();
   const auto& vb = layout_.vertex_bone;
-  is_rigid_.assign(m, 0);
-  for (Eigen::Index t = 0; t < m; ++t) {
-    const int b = vb(model_.tets(t, 0));
-    bool rigid = b >= 0;
-    for (int a = 1; a < 4; ++a) rigid = rigid && vb(model_.tets(t, a)) == b;
-    if (!rigid) continue;
-    is_rigid_[t] = 1;
-    rigid_tets_.push_back(static_cast<int>(t));
-    rigid_tet_bone_.push_back(b);
+  if (same_model) {
+    // The tets' roles and the bone corners depend on the model alone, not
+    // on the weights: ConstantSchur's S0 (and each new alpha's) copies them.
+    is_rigid_ = same_model->is_rigid_;
+    rigid_tets_ = same_model->rigid_tets_;
+    rigid_tet_bone_ = same_model->rigid_tet_bone_;
+    bone_tets_ = same_model->bone_tets_;
+    bone_corner_ = same_model->bone_corner_;
+    bone_corner_bone_ = same_model->bone_corner_bone_;
+    bone_corner_phi_ = same_model->bone_corner_phi_;
+  } else {
+    is_rigid_.assign(m, 0);
+    for (Eigen::Index t = 0; t < m; ++t) {
+      bool touches = false;
+      for (int a = 0; a < 4; ++a) touches |= vb(model_.tets(t, a)) >= 0;
+      if (touches) bone_tets_.push_back(static_cast<int>(t));
+      const int b = vb(model_.tets(t, 0));
+      bool rigid = b >= 0;
+      for (int a = 1; a < 4; ++a) rigid = rigid && vb(model_.tets(t, a)) == b;
+      if (!rigid) continue;
+      is_rigid_[t] = 1;
+      rigid_tets_.push_back(static_cast<int>(t));
+      rigid_tet_bone_.push_back(b);
+    }
+    for (Eigen::Index t = 0; t < m; ++t)
+      for (int a = 0; a < 4; ++a) {
+        const int v = model_.tets(t, a);
+        if (vb(v) < 0 || is_rigid_[t]) continue;
+        bone_corner_.push_back(static_cast<int>(t * 4 + a));
+        bone_corner_bone_.push_back(vb(v));
+      }
+    bone_corner_phi_.resize(4, bone_corner_.size());
+    for (size_t i = 0; i < bone_corner_.size(); ++i)
+      bone_corner_phi_.col(i) = phi_of(model_, layout_, model_.tets(bone_corner_[i] / 4, bone_corner_[i] % 4),
+                                       bone_corner_bone_[i]);
   }
   rigid_own_wv_ = Eigen::VectorXd::Zero(layout_.num_bones);
   rigid_own_tets_.assign(layout_.num_bones, -1);
+  rigid_other_tets_.clear();
+  rigid_other_bone_.clear();
   for (size_t i = 0; i < rigid_tets_.size(); ++i) {
     const int t = rigid_tets_[i], b = rigid_tet_bone_[i];
     if (layout_.tet_unknown(t) == layout_.num_soft + b) {
@@ -126,23 +154,17 @@ void AcapOperator::setup_bones() {
       rigid_other_bone_.push_back(b);
     }
   }
-  for (Eigen::Index t = 0; t < m; ++t)
-    for (int a = 0; a < 4; ++a) {
-      const int v = model_.tets(t, a);
-      if (vb(v) < 0 || is_rigid_[t]) continue;
-      bone_corner_.push_back(static_cast<int>(t * 4 + a));
-      bone_corner_bone_.push_back(vb(v));
-    }
-  bone_corner_phi_.resize(4, bone_corner_.size());
-  for (size_t i = 0; i < bone_corner_.size(); ++i)
-    bone_corner_phi_.col(i) = phi_of(model_, layout_, model_.tets(bone_corner_[i] / 4, bone_corner_[i] % 4),
-                                     bone_corner_bone_[i]);
-  // Coupling L_sb and bone block L_bb from the element matrices w V b_a . b_c.
-  Eigen::MatrixXd Lsb = Eigen::MatrixXd::Zero(ns_, nq_), Lbb = Eigen::MatrixXd::Zero(nq_, nq_);
-  for (Eigen::Index t = 0; t < m; ++t) {
-    bool touches = false;
-    for (int a = 0; a < 4; ++a) touches |= vb(model_.tets(t, a)) >= 0;
-    if (!touches) continue;
+  // Coupling L_sb and bone block L_bb from the element matrices w V b_a . b_c
+  // of the tets touching a bone, each vertex's phi once; L_sb summed in rows
+  // (a free vertex's four entries per bone side by side), then stored by
+  // columns for the solve (the same sums in the same order).
+  Eigen::Matrix<double, 4, Eigen::Dynamic> phi(4, vb.size());
+  for (Eigen::Index v = 0; v < vb.size(); ++v)
+    if (vb(v) >= 0) phi.col(v) = phi_of(model_, layout_, static_cast<int>(v), vb(v));
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Lsb_rows =
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>::Zero(ns_, nq_);
+  Eigen::MatrixXd Lbb = Eigen::MatrixXd::Zero(nq_, nq_);
+  for (const int t : bone_tets_) {
     const ShapeGrads& b = layout_.geometry.grad[t];
     for (int a = 0; a < 4; ++a) {
       const int va = model_.tets(t, a);
@@ -150,15 +172,16 @@ void AcapOperator::setup_bones() {
         const int vc = model_.tets(t, c);
         if (vb(vc) < 0) continue;
         const double e = wv_(t) * b.row(a).dot(b.row(c));
-        const Eigen::Vector4d pc = phi_of(model_, layout_, vc, vb(vc));
+        const Eigen::Vector4d pc = phi.col(vc);
         if (layout_.free_index(va) >= 0) {
-          Lsb.block<1, 4>(layout_.free_index(va), 4 * vb(vc)) += e * pc.transpose();
+          Lsb_rows.block<1, 4>(layout_.free_index(va), 4 * vb(vc)) += e * pc.transpose();
         } else if (vb(va) >= 0) {
-          Lbb.block<4, 4>(4 * vb(va), 4 * vb(vc)) += e * phi_of(model_, layout_, va, vb(va)) * pc.transpose();
+          Lbb.block<4, 4>(4 * vb(va), 4 * vb(vc)) += e * phi.col(va) * pc.transpose();
         }
       }
     }
   }
+  const Eigen::MatrixXd Lsb = Lsb_rows;
   W_.resize(ns_, nq_);
   factor_.solve(Lsb.data(), W_.data(), nq_, rounded_);
   Sb_ = Lbb - Lsb.transpose() * W_;

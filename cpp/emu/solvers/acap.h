@@ -110,7 +110,9 @@ class AcapOperator {
 
  private:
   void solve_with(const Eigen::MatrixXd& R, const Eigen::MatrixXd* h, Eigen::MatrixXd& Z) const;
-  void setup_bones();
+  /// same_model: an operator of the same model whose weight-independent bone
+  /// data (rigid tets, bone corners) are copied (nullptr: computed).
+  void setup_bones(const AcapOperator* same_model);
   /// apply_C with D_t = target(t): a Mat3 or a Map of 9 doubles in column
   /// order, never a lazy expression (it is held with auto per tet).
   /// by_unknowns: target(t) is the unknown of tet t (apply_C_of_unknowns),
@@ -128,6 +130,7 @@ class AcapOperator {
   // Bones: corners whose vertex moves with a bone (t * 4 + a, in fixed order)
   // and the vertex's phi; the coupling and the bone problem.
   std::vector<int> bone_corner_, bone_corner_bone_;
+  std::vector<int> bone_tets_;  // tets with a vertex on a movable bone (L_sb, L_bb)
   // Rigid tets: all four vertices move with one bone b (a bone's own tets,
   // or tissue held between its vertices). Such a tet's corners add
   // sum_a phi_a (w V T b_a)^T = w V [T^T; 0] to b's rows of C T (sum_a b_a = 0,
