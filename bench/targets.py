@@ -22,6 +22,7 @@ import time
 
 import emu
 from bench_scenes import SCENES, start_run
+from error_vs_time import curve
 from emu.geometry import time_within
 
 TARGET_ERROR = 0.01
@@ -32,15 +33,10 @@ FIXED = ("hessian", "preconditioner", "line_search", "step", "other")  # Solutio
 
 
 def recorded(scene, method, act, normalized, reference, **options):
-    """(time to 1% (setup + solve), the Newton step after which it stays within, setup s)."""
-    t0 = time.perf_counter()
-    solver = emu.Solver(scene, method, **options)
-    setup = time.perf_counter() - t0
-    sol = solver.solve(act, normalized=normalized, record_iterates=True)
-    t, e = emu.error_history(sol, reference)
+    """(time to 1% (setup + solve), the Newton step after which it stays within)."""
+    t, e, _ = curve(scene, method, act, normalized, reference, **options)
     reached = time_within(t, e, TARGET_ERROR)
-    steps = int(sum(1 for ti in t if ti < reached)) if reached < float("inf") else None
-    return setup + reached, steps, setup
+    return reached, (int(sum(1 for ti in t if ti < reached)) if reached < float("inf") else None)
 
 
 def phases_to(scene, act, normalized, steps, **options):
@@ -66,10 +62,10 @@ def main(argv=None):
     for name in a.scenes:
         scene, act, normalized = SCENES[name]()
         reference = emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized)
-        fem_t, _, _ = recorded(scene, "fem", act, normalized, reference)
+        fem_t, _ = recorded(scene, "fem", act, normalized, reference)
         best = None
         for alpha in a.alphas:
-            t, steps, _ = recorded(scene, "emu", act, normalized, reference, alpha=alpha, error_estimate=False)
+            t, steps = recorded(scene, "emu", act, normalized, reference, alpha=alpha, error_estimate=False)
             if steps is not None and (best is None or t < best[0]):
                 best = (t, steps, alpha)
         ratio = RATIOS.get(name, 3.0)
