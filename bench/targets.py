@@ -78,9 +78,9 @@ def main(argv=None):
         ph = sol.phase_times
         fixed = sum(ph[p] for p in FIXED)
         cg_s = ph["linear_solve"]
-        per_cg = cg_s / max(sol.cg_iterations, 1)
+        per_cg = cg_s / sol.cg_iterations if sol.cg_iterations else float("nan")   # none: 1% at the start
         budget = fem_t / ratio
-        left = (budget - setup - fixed) / per_cg
+        left = (budget - setup - fixed) / per_cg if sol.cg_iterations else float("nan")
         print(f"| {name} | {len(scene.tets)} | {fem_t:.3f} | {emu_t:.3f} ({alpha:g} mu, {sol.iterations} / "
               f"{sol.cg_iterations}) | {fem_t / emu_t:.1f}x | {ratio:g}x | {budget:.3f} | {setup:.3f} | "
               f"{fixed:.3f} | {cg_s:.3f} ({1e3 * per_cg:.1f}) | {setup + sol.time_s:.3f} | {left:.0f} |", flush=True)

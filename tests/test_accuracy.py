@@ -255,13 +255,13 @@ def test_a_correction_in_a_soft_valley_is_not_taken_for_converged():
 
 def _estimate_stand_in(solver, estimate):
     """Replaces the solver's error estimate by a set one: x1 = the answer with
-    vertex 0 moved along x by estimate() of the diagonal (called once per solve)."""
+    vertex 0 moved along x by estimate() of the diagonal (called once per solve;
+    vertex 0 lies inside the answer's bounding box, so the diagonal stays)."""
     from emu.geometry import bbox_diagonal
-    diag = bbox_diagonal(solver.scene.points)
 
     def fem_correction_of(load, positions):
         x1 = positions.copy()
-        x1[0, 0] += estimate() * diag
+        x1[0, 0] += estimate() * bbox_diagonal(positions)
         return x1, 0.0, ""
     solver._fem_correction_of = fem_correction_of
 
@@ -301,5 +301,17 @@ def test_the_alpha_carried_to_the_next_solve_is_bounded():
         calls[0] = 0
         starts.append(solver.alpha)
         sol = solver.solve({"belly": 1e4})   # 0.02 x 0.8^4: within the accuracy, above 0.6 of it
-        assert sol.settings["alpha_attempts"] == 5 and solver.alpha <= ALPHA_MAX_RATIO * 100.0
+        assert sol.settings["alpha_attempts"] == 5 and sol.accuracy_reached
+        assert sol.error_estimate == pytest.approx(0.02 * 0.8 ** 4, rel=1e-6)
+        assert solver.alpha <= ALPHA_MAX_RATIO * 100.0
     assert starts[1] > 1e4 and starts[2] == ALPHA_MAX_RATIO * 100.0 and solver.alpha == starts[2]
+
+
+def test_an_alpha_set_by_the_user_moves_the_bound():
+    """set_alpha above the bound of the alpha given at construction: the
+    solve runs there and leaves it (the bound follows the user's alpha)."""
+    solver = emu.Solver(fusiform(1, warn=False), "emu", alpha=100.0, accuracy=0.01, fem_correction=False)
+    _estimate_stand_in(solver, lambda: 0.005)   # within 0.6 x the accuracy, above 0.4 x: kept as it is
+    solver.set_alpha(1e7)
+    sol = solver.solve({"belly": 1e4})
+    assert sol.settings["alpha"] == 1e7 and solver.alpha == 1e7

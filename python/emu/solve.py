@@ -274,7 +274,7 @@ class Solver:
                   its error estimate is within 0.6 x accuracy, re-solving
                   warm-started at a larger alpha when it is not, and carries
                   the alpha over to the next solve (``solver.alpha``); a re-solve
-                  that does not lower the estimate is not carried over (the next
+                  that does not lower the estimate by a tenth is not carried over (the next
                   solve starts where this one did; without ``fem_correction`` it
                   ends the raises), and the alpha carried over is at most
                   1e4 x max(alpha, 100)
@@ -605,7 +605,7 @@ class Solver:
                 # EMU's own answers stay near the target and corrections the
                 # exception (where raising alpha has not helped, at the alpha
                 # this solve started at)
-                self.set_alpha(alpha_start if stalled else min(self.alpha * factor, self._alpha_max))
+                self._set_alpha(alpha_start if stalled else min(self.alpha * factor, self._alpha_max))
                 if iterates is not None:   # the corrected answer, when it exists: after the estimates
                     iterates.append((total_s + estimate_s, sol.positions))
                 break
@@ -615,10 +615,10 @@ class Solver:
             # carried over to the next solve
             if (stalled and not self.fem_correction) or attempts >= MAX_ALPHA_ATTEMPTS:
                 if stalled:
-                    self.set_alpha(alpha_start)
+                    self._set_alpha(alpha_start)
                 break
-            before = own
-            self.set_alpha(self.alpha * factor)
+            before, stalled = own, False
+            self._set_alpha(self.alpha * factor)
             highest = self.alpha
             # a warm start at a larger alpha: CG to the tight forcing term, so
             # that the step test sees Newton steps (docs/DESIGN.md)
@@ -655,9 +655,9 @@ class Solver:
                 if sol.converged:   # a solve that stopped early says so in its status already
                     warnings.warn(AccuracyWarning(sol.error_estimate_note), stacklevel=2)
         if sol.error_estimate is not None and sol.error_estimate < AIM * target and not sol.corrected:
-            self.set_alpha(max(self.alpha * 0.5, self.alpha * sol.error_estimate / (AIM * target)))
+            self._set_alpha(max(self.alpha * 0.5, self.alpha * sol.error_estimate / (AIM * target)))
         if self.alpha > self._alpha_max:   # what the next solve starts at stays bounded
-            self.set_alpha(self._alpha_max)
+            self._set_alpha(self._alpha_max)
         return sol
 
     def _correct(self, load, sol: Solution, target: float) -> tuple:
@@ -717,7 +717,13 @@ class Solver:
 
     def set_alpha(self, alpha: float) -> None:
         """EMU: a new alpha (relative to the reference shear modulus) for the
-        following solves; nothing is refactorised."""
+        following solves; nothing is refactorised. With ``accuracy`` the alpha
+        carried from solve to solve stays within 1e4 x max(alpha, 100)."""
+        self._set_alpha(alpha)
+        self._alpha_max = ALPHA_MAX_RATIO * max(self.alpha, DEFAULT_ALPHA)
+
+    def _set_alpha(self, alpha: float) -> None:
+        """set_alpha for accuracy mode's own changes (the bound stays)."""
         if self.method != "emu":
             raise ValueError("alpha is an EMU setting; this solver is FEM")
         if not (math.isfinite(alpha) and alpha > 0):

@@ -104,6 +104,9 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
 void AcapOperator::setup_bones(const AcapOperator* same_model) {
   const Eigen::Index m = model_.tets.rows();
   const auto& vb = layout_.vertex_bone;
+  Eigen::Matrix<double, 4, Eigen::Dynamic> phi(4, vb.size());  // of each bone vertex
+  for (Eigen::Index v = 0; v < vb.size(); ++v)
+    if (vb(v) >= 0) phi.col(v) = phi_of(model_, layout_, static_cast<int>(v), vb(v));
   if (same_model) {
     // The tets' roles and the bone corners depend on the model alone, not
     // on the weights: ConstantSchur's S0 (and each new alpha's) copies them.
@@ -137,8 +140,7 @@ void AcapOperator::setup_bones(const AcapOperator* same_model) {
       }
     bone_corner_phi_.resize(4, bone_corner_.size());
     for (size_t i = 0; i < bone_corner_.size(); ++i)
-      bone_corner_phi_.col(i) = phi_of(model_, layout_, model_.tets(bone_corner_[i] / 4, bone_corner_[i] % 4),
-                                       bone_corner_bone_[i]);
+      bone_corner_phi_.col(i) = phi.col(model_.tets(bone_corner_[i] / 4, bone_corner_[i] % 4));
   }
   rigid_own_wv_ = Eigen::VectorXd::Zero(layout_.num_bones);
   rigid_own_tets_.assign(layout_.num_bones, -1);
@@ -158,9 +160,6 @@ void AcapOperator::setup_bones(const AcapOperator* same_model) {
   // of the tets touching a bone, each vertex's phi once; L_sb summed in rows
   // (a free vertex's four entries per bone side by side), then stored by
   // columns for the solve (the same sums in the same order).
-  Eigen::Matrix<double, 4, Eigen::Dynamic> phi(4, vb.size());
-  for (Eigen::Index v = 0; v < vb.size(); ++v)
-    if (vb(v) >= 0) phi.col(v) = phi_of(model_, layout_, static_cast<int>(v), vb(v));
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Lsb_rows =
       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>::Zero(ns_, nq_);
   Eigen::MatrixXd Lbb = Eigen::MatrixXd::Zero(nq_, nq_);

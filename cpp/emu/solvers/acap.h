@@ -51,8 +51,9 @@ class AcapOperator {
  public:
   /// weight_volume  #T per-tet weights of the fit (nullptr: the ACAP weights
   ///                w_t V_t; ConstantSchur builds the same operator with others)
-  /// pattern_of     an operator of the same model whose assembly pattern and
-  ///                symbolic analysis are reused (nullptr: its own)
+  /// pattern_of     an operator of the same model and layout whose assembly
+  ///                pattern, symbolic analysis and weight-independent bone
+  ///                data (rigid tets, bone corners) are reused (nullptr: its own)
   /// single_precision  every solve with the factor rounded to float, the bone
   ///                elimination's included: the exact inverse of the rounded
   ///                matrix, for a preconditioner (ConstantSchur's own S0)

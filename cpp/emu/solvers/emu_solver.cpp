@@ -379,18 +379,34 @@ void EmuSolver::bone_turns_into(const std::vector<Mat9>& A, int b, const std::ar
   }
 }
 
-std::pair<Eigen::MatrixXd, Eigen::MatrixXd> EmuSolver::bone_turn(const LoadCase& load, const Eigen::MatrixXd& Frows,
-                                                                 int bone, const Eigen::Matrix3d& M,
-                                                                 bool exact) const {
+template <int N>
+std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, N> EmuSolver::turns_at(const LoadCase& load,
+                                                                               const Eigen::MatrixXd& Frows, int bone,
+                                                                               const std::array<Mat3, N>& M,
+                                                                               bool exact) const {
   if (bone < 0 || bone >= static_cast<int>(turn_fits_.size()))
     throw std::invalid_argument("bone_turn: bone " + std::to_string(bone) + " is not a movable bone of a solver " +
                                 "with the bone coarse space (" + std::to_string(turn_fits_.size()) + " such bones)");
   const Context c = make_context(load);
   std::vector<Mat9> A, A_exact;
   blocks_into(c, to_cols(Frows), &A, &A_exact);
-  std::array<Mat9X, 1> Z, HZ;  // the coarse space's path (bone_turns_into), one turn
-  bone_turns_into<1>(exact ? A_exact : A, bone, {M}, Z, HZ);
-  return {Z[0].transpose(), HZ[0].transpose()};
+  std::array<Mat9X, N> Z, HZ;  // the coarse space's path
+  bone_turns_into<N>(exact ? A_exact : A, bone, M, Z, HZ);
+  std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, N> out;
+  for (int k = 0; k < N; ++k) out[k] = {Z[k].transpose(), HZ[k].transpose()};
+  return out;
+}
+
+std::pair<Eigen::MatrixXd, Eigen::MatrixXd> EmuSolver::bone_turn(const LoadCase& load, const Eigen::MatrixXd& Frows,
+                                                                 int bone, const Eigen::Matrix3d& M,
+                                                                 bool exact) const {
+  return turns_at<1>(load, Frows, bone, {M}, exact)[0];
+}
+
+std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, 3> EmuSolver::bone_turns(
+    const LoadCase& load, const Eigen::MatrixXd& Frows, int bone, const std::array<Eigen::Matrix3d, 3>& M,
+    bool exact) const {
+  return turns_at<3>(load, Frows, bone, M, exact);
 }
 
 Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {

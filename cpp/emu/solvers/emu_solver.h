@@ -79,6 +79,12 @@ class EmuSolver {
   /// unit-turn fits (no fit per turn), as the coarse space builds them.
   std::pair<Eigen::MatrixXd, Eigen::MatrixXd> bone_turn(const LoadCase& load, const Eigen::MatrixXd& F, int bone,
                                                         const Eigen::Matrix3d& M, bool exact = false) const;
+  /// The same for three tangents at once, as the coarse space's rebuild forms
+  /// them (one pass over the blocks); the same bits as three bone_turn calls.
+  std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, 3> bone_turns(const LoadCase& load, const Eigen::MatrixXd& F,
+                                                                         int bone,
+                                                                         const std::array<Eigen::Matrix3d, 3>& M,
+                                                                         bool exact = false) const;
   /// Blocks A_u, #unknowns by 81 (column-major 9x9 per row); filtered unless exact.
   Eigen::MatrixXd block_hessians(const LoadCase& load, const Eigen::MatrixXd& F, bool exact = false) const;
   Eigen::MatrixXd mode_matrix() const { return woodbury_->dense_B(); }
@@ -140,6 +146,10 @@ class EmuSolver {
   /// N turns of bone b at once, Z[k] and the Euclidean H Z[k] = A Z[k] - alpha
   /// C^T K^-1 C Z[k] (hessian_product_from_fit of bone_turn_into's Z and Fd):
   /// one pass over the blocks A for all N (the coarse space's rebuild, N = 3).
+  template <int N>
+  std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, N> turns_at(const LoadCase& load, const Eigen::MatrixXd& F,
+                                                                      int bone, const std::array<Mat3, N>& M,
+                                                                      bool exact) const;
   template <int N>
   void bone_turns_into(const std::vector<Mat9>& A, int b, const std::array<Mat3, N>& M, std::array<Mat9X, N>& Z,
                        std::array<Mat9X, N>& HZ) const;
