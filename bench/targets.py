@@ -26,9 +26,9 @@ from error_vs_time import curve
 from emu.geometry import time_within
 
 TARGET_ERROR = 0.01
-# the ratios FEM Newton / EMU at 1%, 1 thread
-RATIOS = {"realistic_biceps": 3.0, "arm_r5": 3.0, "fusiform_80k": 10.0, "fusiform_20k": 3.0,
-          "simple_joint_free": 3.0, "big_muscle_free": 3.0, "neck_r2": 3.0, "arm_r3": 3.0, "fusiform_r3": 3.0}
+# the ratios FEM Newton / EMU at 1%, 1 thread: 3x on the bone scenes
+# (RATIOS.get's default), 10x on the fusiform at 80k tets
+RATIOS = {"fusiform_80k": 10.0}
 FIXED = ("hessian", "preconditioner", "line_search", "step", "other")  # Solution.phase_times outside CG
 
 

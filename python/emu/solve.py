@@ -605,7 +605,7 @@ class Solver:
                 # EMU's own answers stay near the target and corrections the
                 # exception (where raising alpha has not helped, at the alpha
                 # this solve started at)
-                self._set_alpha(alpha_start if stalled else min(self.alpha * factor, self._alpha_max))
+                self._set_alpha(alpha_start if stalled else self.alpha * factor)   # bounded below
                 if iterates is not None:   # the corrected answer, when it exists: after the estimates
                     iterates.append((total_s + estimate_s, sol.positions))
                 break

@@ -323,31 +323,17 @@ void EmuSolver::hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X
   }
 }
 
-void EmuSolver::bone_turn_into(int b, const Mat3& M, Mat9X& Z, Mat9X& Fd) const {
-  // The fit is linear in the per-tet targets and each target acts on the
-  // shape-function gradients from the left (K = L (x) I3): targets M T_t fit
-  // to positions X M^T, whose F_t are M F_t(X). So the turn by M is M times the
-  // unit turn, and so is its fit.
-  const UnitTurnFits& f = turn_fits_[b];
-  const int ns = layout_.num_soft;
-  const Eigen::Index m = model_.tets.rows();
-  Z.setZero(9, layout_.num_unknowns);
-  Fd.resize(9, m);
-#pragma omp parallel for schedule(static)
-  for (int u = 0; u < ns; ++u) Z.col(u) = flatten(Mat3(M * unflatten(f.follow.col(u))));
-  Z.col(ns + b) = flatten(M);
-#pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t) Fd.col(t) = flatten(Mat3(M * unflatten(f.fit.col(t))));
-}
-
 template <int N>
 void EmuSolver::bone_turns_into(const std::vector<Mat9>& A, int b, const std::array<Mat3, N>& M,
                                 std::array<Mat9X, N>& Z, std::array<Mat9X, N>& HZ) const {
-  // bone_turn_into then hessian_product_from_fit, per turn k: on a soft
-  // unknown u (tet t) Z_k = vec(M_k Phi_u), H Z_k = A_u Z_k - alpha w V
-  // vec(M_k fit_t); the N turns in one loop, so each block A_u comes from
-  // memory once. Each product is the per-turn path's (a 9x9 times 9x3 lazy
-  // product rounds differently), so the two give the same bits.
+  // The fit is linear in the per-tet targets and each target acts on the
+  // shape-function gradients from the left (K = L (x) I3): targets M T_t fit
+  // to positions X M^T, whose F_t are M F_t(X). So the turn by M is M times the
+  // unit turn, and so is its fit: on a soft unknown u (tet t) Z_k = vec(M_k
+  // Phi_u), H Z_k = A_u Z_k - alpha w V vec(M_k fit_t) (hessian_product_from_fit
+  // with that fit). The N turns share one loop, so each block A_u comes from
+  // memory once; each product is still a 9x9 times one vector (a 9x9 times 9x3
+  // lazy product rounds differently), so N = 1 and N = 3 give the same bits.
   const UnitTurnFits& f = turn_fits_[b];
   const auto& wv = acap_->weight_volume();
   const double alpha = emu_.alpha;
@@ -689,15 +675,11 @@ class EmuSolver::Newton {
       coarse_.build(
           F_,
           [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
-            if (s_.has_contact() && Hc_.nonZeros()) {
-              for (int k = 0; k < 3; ++k) {
-                s_.bone_turn_into(b, M[k], Z[k], Fd_);  // Z without a back-substitution
-                product(Z[k], HZ[k]);                    // contact's term needs the fitted positions
-              }
-              return;
-            }
             s_.bone_turns_into<3>(H, b, M, Z, HZ);  // the three turns in one pass over H's blocks
-            for (int k = 0; k < 3; ++k) s_.riemannian_columns(F_, g_, Z[k], exact, HZ[k]);
+            for (int k = 0; k < 3; ++k) {
+              if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
+              else s_.riemannian_columns(F_, g_, Z[k], exact, HZ[k]);
+            }
           },
           product, recycled_);
     }

@@ -140,12 +140,10 @@ class EmuSolver {
   void hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) const;
   /// The same with v's fit given: Fd (9 x #T) = F_t(x*(v)).
   void hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, const Mat9X& Fd, Mat9X& out) const;
-  /// The turn of bone b by M with the soft tissue following (see bone_turn):
-  /// Z (9 x #unknowns) and the F_t of its fit Fd (9 x #T), from turn_fits_.
-  void bone_turn_into(int b, const Mat3& M, Mat9X& Z, Mat9X& Fd) const;
-  /// N turns of bone b at once, Z[k] and the Euclidean H Z[k] = A Z[k] - alpha
-  /// C^T K^-1 C Z[k] (hessian_product_from_fit of bone_turn_into's Z and Fd):
-  /// one pass over the blocks A for all N (the coarse space's rebuild, N = 3).
+  /// N turns of bone b by M[k] with the soft tissue following (see bone_turn),
+  /// from turn_fits_: Z[k] (9 x #unknowns) and the Euclidean H Z[k] = A Z[k] -
+  /// alpha C^T K^-1 C Z[k] without a back-substitution, one pass over the
+  /// blocks A for all N (the coarse space's rebuild, N = 3).
   template <int N>
   std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, N> turns_at(const LoadCase& load, const Eigen::MatrixXd& F,
                                                                       int bone, const std::array<Mat3, N>& M,
@@ -200,7 +198,7 @@ class EmuSolver {
   // F_t following is M times that of the unit turn M = I: per bone, F_t of the
   // unit turn's fit on the soft unknowns (follow, 9 x #soft) and F_t of the fit
   // of that followed field (fit, 9 x #T), two fits once at setup in place of
-  // six per Newton step (bone_turn_into).
+  // six per Newton step (bone_turns_into).
   struct UnitTurnFits {
     Mat9X follow, fit;
   };
