@@ -25,7 +25,7 @@ from variants import parse_variant
 def scene_row(name, scene, act, normalized, fem, accuracy, variant) -> str:
     solver = emu.Solver(scene, "emu", **{"accuracy": accuracy, **variant})
     sol = solver.solve(act, normalized=normalized)
-    return (f"| {name} | {sol.iterations} / {sol.cg_iterations} | {sol.time_s:.2f} + {sol.error_estimate_time_s:.2f} | "
+    return (f"| {name} | {sol.iterations} / {sol.cg_iterations} | {sol.solve_time_s:.2f} + {sol.error_estimate_time_s:.2f} | "
             f"{solver.alpha:.0f} ({sol.settings['alpha_attempts']}) | {sol.error_estimate:.2e} | "
             f"{emu.vertex_error(sol, fem):.2e} |")
 

@@ -46,7 +46,7 @@ def run(resolution: int, frames: int, method: str, contact: bool, fem_correction
     for a in np.linspace(0.0, 1.0, frames):
         sol = solver.solve({"flexor": float(a)}, normalized=True, initial=prev)
         prev = sol
-        out["solve_s"] += sol.time_s
+        out["solve_s"] += sol.solve_time_s
         out["estimate_s"] += sol.error_estimate_time_s
         out["iterations"] += sol.iterations
         out["cg"] += sol.cg_iterations

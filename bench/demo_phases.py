@@ -29,7 +29,7 @@ def run_frames(spec, method: str, references=None, **options) -> dict:
         previous = sol
         if references is not None:
             errors.append(emu.vertex_error(sol.positions, references[k]))
-        totals["solve_s"] += sol.time_s
+        totals["solve_s"] += sol.solve_time_s
         totals["estimate_s"] += sol.error_estimate_time_s
         totals["newton"] += sol.iterations
         totals["cg"] += sol.cg_iterations

@@ -32,7 +32,7 @@ def main(argv=None):
     warnings.simplefilter("ignore")
     i = emu.info()
     print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {i['omp_threads']}; {time.strftime('%Y-%m-%d')}\n")
-    print("| example | tets | frames | EMU settings | EMU s (estimate s) | FEM s | max true error | max estimate | "
+    print("| example | tets | frames | EMU settings | EMU s (of it estimates s) | FEM s | max true error | max estimate | "
           "alpha range | estimate's factorisations |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for path in paths:

@@ -40,7 +40,7 @@ t0 = time.perf_counter()
 solver = emu.Solver(s, "emu", **opts)
 setup = time.perf_counter() - t0
 sol = solver.solve(act, **load)
-print(json.dumps(dict(tets=len(s.tets), setup=setup, solve=sol.time_s, estimate=sol.error_estimate_time_s,
+print(json.dumps(dict(tets=len(s.tets), setup=setup, solve=sol.solve_time_s, estimate=sol.error_estimate_time_s,
                       newton=sol.iterations, cg=sol.cg_iterations, structures=solver.structures(),
                       rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)))
 """

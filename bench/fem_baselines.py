@@ -57,7 +57,7 @@ def sequence(frames, resolution):
             prev = sol
             for p in PHASES:
                 total[p] += sol.phase_times[p]
-            total["solve"] += sol.time_s
+            total["solve"] += sol.solve_time_s
             total["estimate"] += sol.error_estimate_time_s
             total["newton"] += sol.iterations
             total["cg"] += sol.cg_iterations

@@ -81,8 +81,8 @@ def test_a_re_solve_takes_its_alpha_from_the_closest_fem_point():
     for alpha in (234.0, 200.0, 270.0, 170.0):
         solver = emu.Solver(s, "emu", alpha=alpha, accuracy=0.01)
         returned = []
-        plain_correct = solver._correct
-        solver._correct = lambda *a, _c=plain_correct: returned.append(_c(*a)) or returned[-1]
+        plain_correct = solver._accuracy.correct
+        solver._accuracy.correct = lambda *a, _c=plain_correct: returned.append(_c(*a)) or returned[-1]
         sol = solver.solve(act, record_iterates=True)
         if returned and not returned[0][0] and returned[0][1] is not None:
             break
@@ -104,7 +104,7 @@ def test_a_re_solve_takes_its_alpha_from_the_closest_fem_point():
 
 
 def test_correct_on_synthetic_corrections():
-    """Solver._correct's rule on set FEM corrections (a stand-in estimator
+    """AccuracyMode.correct's rule on set FEM corrections (a stand-in estimator
     moving one vertex along x by the given fractions of the diagonal): the
     corrections contract -> corrected, positions x2, estimate |x2 - x1|; x1
     overshot (the second step 0.33 of the first) and the third contracts ->
@@ -128,7 +128,7 @@ def test_correct_on_synthetic_corrections():
         def __init__(self, steps):
             self.steps, self.calls = steps, 0
 
-        def newton_correction(self, load, y, max_steps=1):
+        def newton_correction(self, load, y, hessian="lower-energy", max_steps=1):
             self.calls += 1
             d = round((y[0, 0] - x[0, 0]) / diag, 9)
             return at(self.steps[d])
@@ -137,7 +137,7 @@ def test_correct_on_synthetic_corrections():
         solver._estimator = Corrections(steps)
         trial = dataclasses.replace(sol, positions=x, fem_correction=at(own),
                                     error_estimate=emu.vertex_error(x, at(own)), corrected=False)
-        return solver._correct(load, trial, 0.01), trial, solver._estimator.calls
+        return solver._accuracy.correct(solver, load, trial), trial, solver._estimator.calls
 
     (ok, closer), trial, calls = run(0.008, {0.008: 0.0085, 0.0085: 0.0086})
     assert ok and closer is None and trial.corrected and calls == 2
@@ -288,7 +288,7 @@ def test_the_alpha_carried_to_the_next_solve_is_bounded():
     raised about 1000x and carried over; what the next solve starts at stays
     within ALPHA_MAX_RATIO x the alpha given (1e6 mu here) instead of
     growing from frame to frame (1e5, 1e8, ... before)."""
-    from emu.solve import ALPHA_MAX_RATIO
+    from emu.accuracy import ALPHA_MAX_RATIO
     solver = emu.Solver(fusiform(1, warn=False), "emu", alpha=100.0, accuracy=0.01, fem_correction=False)
     calls = [0]
 
@@ -315,3 +315,69 @@ def test_an_alpha_set_by_the_user_moves_the_bound():
     solver.set_alpha(1e7)
     sol = solver.solve({"belly": 1e4})
     assert sol.settings["alpha"] == 1e7 and solver.alpha == 1e7
+
+
+def test_a_re_solve_starts_from_fem_s_correction():
+    """Where the estimate misses and no correction is taken, the re-solve at
+    the larger alpha starts from the FEM correction x1 of the first answer
+    (the deformation gradients of x1: EMU then only settles at the new alpha),
+    not from EMU's own F: its first iterate is x1, far closer to FEM's answer
+    than the answer the first solve ended at (the parent restarted there)."""
+    s = fusiform(2, warn=False)
+    fem = emu.solve(s, {"belly": 5e4}, "fem", rtol_grad=1e-9)
+    solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005, fem_correction=False)
+    corrections, estimate = [], solver._fem_correction_of
+
+    def recorded(load, positions):
+        out = estimate(load, positions)
+        corrections.append(out[0])
+        return out
+    solver._fem_correction_of = recorded
+    sol = solver.solve({"belly": 5e4}, record_iterates=True)
+    assert sol.settings["alpha_attempts"] >= 2 and emu.vertex_error(sol, fem) <= 0.005
+    restart = np.flatnonzero(sol.history["iteration"] == 0)[1]
+    end_of_first, start_of_second = sol.iterates[restart - 1][1], sol.iterates[restart][1]
+    assert emu.vertex_error(start_of_second, fem) < 0.5 * emu.vertex_error(end_of_first, fem)
+    # x1 is compatible: the fit of its deformation gradients is x1 itself
+    assert emu.vertex_error(start_of_second, corrections[0]) < 1e-9
+
+
+def test_reported_times_are_whole():
+    """time_s is the whole solve: every alpha's solve, the error estimates and
+    FEM corrections (the parent left the estimates out); its parts beside it,
+    and the phases sum to it."""
+    import time
+    s = fusiform(2, warn=False)
+    for method, options in (("emu", dict(alpha=100.0, accuracy=0.005)), ("fem", dict(accuracy=0.01))):
+        solver = emu.Solver(s, method, **options)
+        t0 = time.perf_counter()
+        sol = solver.solve({"belly": 5e4})
+        wall = time.perf_counter() - t0
+        assert sol.solve_time_s > 0 and sol.time_s <= wall
+        assert sol.time_s >= sol.solve_time_s + sol.error_estimate_time_s - 1e-9
+        assert sum(sol.phase_times.values()) == pytest.approx(sol.time_s, rel=1e-9)
+        assert sol.phase_times["error_estimate"] == sol.error_estimate_time_s
+        assert (sol.error_estimate_time_s > 0) == (method == "emu")
+        assert f"{sol.time_s:.3f} s" in sol.summary()
+
+
+def test_lagged_newton_corrections_factorise_nothing():
+    """The corrections accuracy mode certifies answers with: the exact Newton
+    step by PCG on the estimator's last factor, nothing factorised; no factor
+    yet, or a point where that PCG fails, is an error (the caller takes it as
+    'no correction'), never a filtered step. Where the exact Hessian is
+    definite the step is the exact mode's (to PCG's tolerance)."""
+    s = fusiform(2, warn=False)
+    solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.01)
+    sol = solver.solve({"belly": 5e4})
+    load = solver.load_case({"belly": 5e4})
+    fresh = emu._core.FemSolver(solver.model, emu._core.SolverOptions())
+    with pytest.raises(RuntimeError, match="lagged Newton"):
+        fresh.newton_correction(load, sol.positions, "lagged-newton", 1)   # no factor yet
+    est = solver._estimator
+    n = est.factorizations
+    x = sol.fem_correction
+    y = np.asarray(est.newton_correction(load, x, "lagged-newton", 1))
+    assert est.factorizations == n
+    exact = np.asarray(fresh.newton_correction(load, x, "exact", 1))   # a fresh factorisation
+    assert emu.vertex_error(y, exact) < 1e-3 * emu.vertex_error(x, exact)

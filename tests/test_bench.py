@@ -189,3 +189,24 @@ def test_targets_small():
     for line in rows.values():
         cells = [c.strip() for c in line.strip("|").split("|")]
         assert cells[5] == "3x" and float(cells[2]) > 0 and "mu," in cells[3]   # target, FEM's time, EMU's alpha
+
+
+def test_shipped_small(tmp_path):
+    """The user's figure: each method in its own process at accuracy=0.01,
+    every answer checked against strict FEM, single solves and a short
+    sequence."""
+    out = run(BENCH / "shipped.py", "--scenes", "fusiform_r3", "arm_r1", "--out", tmp_path)
+    rows = json.loads((tmp_path / "shipped.json").read_text())
+    assert [r["scene"] for r in rows] == ["fusiform_r3", "arm_r1"]
+    for r in rows:
+        for method in ("fem", "fem_lagged", "emu"):
+            run_ = r["runs"][method]
+            assert "failed" not in run_, run_
+            assert max(run_["errors"]) <= 0.01 and run_["peak_rss_mb"] >= run_["scene_rss_mb"] > 0
+            assert run_["total_s"] >= run_["setup_s"] > 0
+        assert r["faster_fem_over_emu"] > 0
+    assert "| fusiform_r3 |" in out and "| arm_r1 |" in out
+    run(BENCH / "shipped.py", "--scenes", "fusiform_r3", "--frames", "3", "--out", tmp_path)
+    seq = json.loads((tmp_path / "shipped_sequences.json").read_text())[0]
+    assert len(seq["runs"]["emu"]["frame_s"]) == 3 and max(seq["runs"]["emu"]["errors"]) <= 0.01
+    assert seq["runs"]["emu"]["warm_frame_s"] > 0

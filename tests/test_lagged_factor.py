@@ -68,7 +68,9 @@ def test_phase_times_account_for_the_solve(kind):
     for method in ("fem", "emu"):
         sol = emu.Solver(scene, method, alpha=100, error_estimate=False).solve(act, normalized=normalized)
         t = sol.phase_times
-        assert set(t) == {"hessian", "preconditioner", "linear_solve", "line_search", "step", "other"}
+        assert set(t) == {"hessian", "preconditioner", "linear_solve", "line_search", "step", "error_estimate",
+                          "other"}
+        assert t["error_estimate"] == 0   # none asked for
         assert all(v >= 0 for v in t.values())
         assert sum(t.values()) == pytest.approx(sol.time_s, rel=1e-6, abs=1e-9)
         assert t["linear_solve"] > 0 and t["hessian"] > 0

@@ -79,7 +79,7 @@ def test_accuracy_mode_floors_cg_forcing_where_its_step_test_applies(kind):
     the floor, the first step it can act on stops no later (from the same
     state, a looser tolerance), and both answers are within the accuracy of
     FEM's."""
-    from emu.solve import ACCURACY_CG_FORCING_MIN, STEP_GRAD
+    from emu.accuracy import ACCURACY_CG_FORCING_MIN, STEP_GRAD
     assert ACCURACY_CG_FORCING_MIN == pytest.approx(STEP_GRAD ** 0.5)
     make, act, normalized = SMALL_KINDS[kind]
     scene = make()

@@ -250,8 +250,10 @@ void bind_solvers(py::module_& m) {
             FemSolver::CorrectionHessian h = FemSolver::CorrectionHessian::LowerEnergy;
             if (hessian == "exact") h = FemSolver::CorrectionHessian::Exact;
             else if (hessian == "filtered") h = FemSolver::CorrectionHessian::Filtered;
+            else if (hessian == "lagged-newton") h = FemSolver::CorrectionHessian::LaggedNewton;
             else if (hessian != "lower-energy")
-              throw std::invalid_argument("hessian must be 'lower-energy', 'exact' or 'filtered', got '" + hessian + "'");
+              throw std::invalid_argument("hessian must be 'lower-energy', 'exact', 'filtered' or 'lagged-newton', got '" +
+                                          hessian + "'");
             py::gil_scoped_release release;
             return s.newton_correction(l, x0, h, max_steps);
           },

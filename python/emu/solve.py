@@ -1,6 +1,7 @@
 """Solving a scene for its quasi-static equilibrium, by FEM or by EMU."""
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 import warnings
@@ -9,7 +10,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
+from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, DEFAULT_ACCURACY,
+                       DEFAULT_ALPHA, STEP_FRACTION, STEP_GRAD, AccuracyMode, AccuracyWarning)
 from .checks import inverted_tets
+from .geometry import deformation_gradients
 from .contact import ContactTerm
 from .geometry import bbox_diagonal, tet_vertices, vertex_error
 from .lowering import build_model, declared_joint_rows, declared_joint_world, model_tet_order
@@ -25,53 +29,11 @@ class NeutralModeWarning(UserWarning):
     equilibrium is not unique (see Solution.neutral_modes)."""
 
 
-class AccuracyWarning(UserWarning):
-    """EMU with ``accuracy=``: the error estimate stayed above the accuracy asked
-    for after every alpha tried (see Solution.accuracy_reached)."""
-
 METHODS = ("emu", "fem")
 STEPS = ("newton-krylov", "woodbury", "lbfgs")
 # how the PSD-filtered element Hessian treats a negative eigenvalue (SolverOptions::eigen_filter order)
 EIGEN_FILTERS = ("clamp", "abs")
 PRECONDITIONERS = ("woodbury", "schur", "constant-schur")
-# accuracy= (EMU): accept a solve whose error estimate is within ACCEPT x the
-# target (the estimate was measured at 0.65-1.35 x the true error), aim new
-# alphas at AIM x the target; stop iterating when a full step moves no vertex
-# by more than STEP_FRACTION x the target (measured: docs/DESIGN.md).
-# The step test needs steps that are Newton steps: after a warm start at a
-# larger alpha, CG to a tighter forcing term (ACCURACY_CG_FORCING; at 0.5, one
-# CG iteration there passed the test while missing the bone's turn).
-ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS, ACCURACY_CG_FORCING = 0.6, 0.4, 0.1, 5, 0.01
-# ... and where EMU's estimate misses, its answer corrected by FEM Newton steps
-# (the correction x1 the estimate computed, and x2 = the correction of x1) is
-# returned instead of re-solving at a larger alpha, when those steps contract:
-# |x2 - x1| <= CORRECTION_CONTRACTION |x1 - x| and |x2 - x1| <= ACCEPT x the
-# target, and the next correction x3 contracts again, |x3 - x2| <=
-# CORRECTION_CONTRACTION |x2 - x1| (measured: docs/DESIGN.md, "Accuracy mode:
-# FEM-corrected answers").
-CORRECTION_CONTRACTION = 0.3
-# EMU without alpha or accuracy: accuracy = DEFAULT_ACCURACY, starting at DEFAULT_ALPHA.
-DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
-# ... and the step test applies once |g| <= STEP_GRAD max(|g_0|, |g| at the cold
-# start under the same load) (measured: docs/DESIGN.md; the cold start's scale
-# for warm starts: "The gate of a warm start"; checked by the error estimate)
-STEP_GRAD = 1e-2
-# ... and CG is asked for no more than Eisenstat-Walker's forcing term where
-# the step test begins to apply, sqrt(STEP_GRAD) (an answer to an accuracy
-# needs no superlinear endgame; measured: docs/DESIGN.md, "Accuracy as the knob")
-ACCURACY_CG_FORCING_MIN = math.sqrt(STEP_GRAD)
-# The alpha rule assumes EMU's error is alpha's (error ~ alpha^-p, p >= 0.3
-# measured). A re-solve at a larger alpha whose estimate is still above
-# RESOLVE_GAIN x the estimate before it shows the error is something else
-# (the stopping point, a different inverted equilibrium): the retries stop and
-# the next solve starts at the alpha this one started at (with FEM
-# corrections on, the retries go on: a larger alpha can bring EMU's answer
-# within their reach). The alpha a solve leaves for the next never exceeds
-# ALPHA_MAX_RATIO x max(the alpha given, DEFAULT_ALPHA) (within a solve the
-# retries' factors bound it). Without either, such a sequence multiplied
-# alpha by up to 30 per retry and per frame (docs/DESIGN.md, "Accuracy as the
-# knob": 4e39 mu by the 24th frame).
-RESOLVE_GAIN, ALPHA_MAX_RATIO = 0.9, 1e4
 # EMU's strict solves (no accuracy) also stop when a full step moves no vertex
 # by more than POSITION_TOL x the bounding-box diagonal, once |g| <=
 # POSITION_TOL_GRAD |g_0|: with bones the gradient's round-off (the fit's
@@ -93,8 +55,15 @@ class Solution:
 
     positions   (n, 3) equilibrium positions (EMU: the ACAP fit x*(F))
     converged   whether the stopping test passed; status says why it stopped
+    time_s      the whole solve, as a wall clock sees it: every solve at every
+                alpha, the error estimates and FEM corrections, the Python
+                around them (setup_time_s, the Solver's construction, apart);
+                its parts: solve_time_s (the solver's iterations) and
+                error_estimate_time_s, and phase_times
+    solve_time_s  the solver's own iterations (every alpha's solve)
     history     dict of per-iteration arrays (entry 0 is the start): energy,
-                grad_norm, time_s (since the solve began), step, cg_iterations, backtracks
+                grad_norm, time_s (since the solve began, estimates included), step,
+                cg_iterations, backtracks
     F           (m, 3, 3) EMU's deformation-gradient unknowns (None for FEM)
     iterates    with solve(record_iterates=True): one (time_s, positions (n, 3))
                 per iterate, the start first (see emu.error_history)
@@ -121,12 +90,12 @@ class Solution:
     accuracy_reached  EMU with ``accuracy=``: whether the error estimate ended
                 within the accuracy asked for (False: an AccuracyWarning, and
                 error_estimate_note says by how much it missed); None otherwise
-    phase_times seconds per phase of the solve: hessian (element Hessian
-                blocks; FEM: and their assembly), preconditioner (EMU: its
-                rebuilds and the bone coarse space), linear_solve (FEM:
+    phase_times seconds per phase of the solve, summing to time_s: hessian
+                (element Hessian blocks; FEM: and their assembly), preconditioner
+                (EMU: its rebuilds and the bone coarse space), linear_solve (FEM:
                 factorisations and back-substitutions; EMU: CG), line_search,
-                step (the accepted step and its gradient), other (the rest
-                of time_s); error_estimate_time_s comes on top
+                step (the accepted step and its gradient), error_estimate (EMU:
+                estimates and FEM corrections), other (the rest)
     """
     method: str
     positions: np.ndarray
@@ -159,6 +128,7 @@ class Solution:
     corrected: bool = False
     fem_correction: np.ndarray | None = field(default=None, repr=False)
     contact: dict | None = None      # scenes with contact: active pairs and minimum gap at positions
+    solve_time_s: float = 0.0        # the solver's iterations alone (time_s: the whole solve)
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
@@ -171,8 +141,13 @@ class Solution:
         if self.corrected:
             est += " (EMU's answer corrected by two FEM Newton steps)"
         return (f"{self.label}: {state} in {self.iterations} iterations{cg}, "
-                f"{self.time_s:.3f} s (+{self.setup_time_s:.3f} s setup), |g|/|g0| = "
+                f"{self.time_s:.3f} s{self._parts()} (+{self.setup_time_s:.3f} s setup), |g|/|g0| = "
                 f"{self.grad_norm / self.grad_norm0 if self.grad_norm0 else 0:.2e}{est}")
+
+    def _parts(self) -> str:
+        if not self.error_estimate_time_s:
+            return ""
+        return f" (solve {self.solve_time_s:.3f} s, error estimate {self.error_estimate_time_s:.3f} s)"
 
     @property
     def label(self) -> str:
@@ -187,10 +162,12 @@ class Solution:
 PHASES = ("hessian", "preconditioner", "linear_solve", "line_search", "step")
 
 
-def _phase_times(r) -> dict:
-    """Solution.phase_times from a core SolveResult: its phases and the rest of time_s."""
+def _phase_times(r, estimate_s: float) -> dict:
+    """Solution.phase_times of one solve from a core SolveResult and its estimate's seconds
+    (other: the rest of the solver's time; Solver.solve makes it the rest of the whole)."""
     times = {name: float(getattr(r.phases, name)) for name in PHASES}
-    times["other"] = max(0.0, float(r.time_s) - sum(times.values()))
+    times["error_estimate"] = float(estimate_s)
+    times["other"] = max(0.0, float(r.time_s) - sum(times.values()) + estimate_s)
     return times
 
 
@@ -339,7 +316,6 @@ class Solver:
         self.scene, self.method, self.step = scene, method, step
         self.accuracy = None if accuracy is None else float(accuracy)
         self.alpha = float(alpha)
-        self._alpha_max = ALPHA_MAX_RATIO * max(self.alpha, DEFAULT_ALPHA)   # automatic raises stop there
         self._model_tets = model_tet_order(scene)  # the scene's tet of each model tet
         self.model = build_model(scene, tet_order=self._model_tets)
         self.fibers = np.zeros((len(scene.tets), 3))
@@ -457,7 +433,11 @@ class Solver:
             fem_correction = self.contact is None
         self.fem_correction = bool(fem_correction) and method == "emu"
         self.settings["fem_correction"] = self.fem_correction
+        # accuracy mode's controller (EMU): alpha per solve, answers accepted or corrected
+        self._accuracy = (AccuracyMode(self.accuracy, self.fem_correction, self.alpha)
+                          if self.accuracy is not None and method == "emu" else None)
         self._estimator = None       # FEM's Newton system for the error estimate, built at first use
+        self._observers = (None, None)   # (on_iteration, iterates) of the solve in progress
         self._estimator_error = ""   # why there is none (a scene FEM does not handle)
 
     def activation_vector(self, activation=None, normalized: bool = False) -> np.ndarray:
@@ -574,136 +554,12 @@ class Solver:
             raise TypeError(f"on_iteration must be callable, got {type(on_iteration).__name__}")
         iterates = [] if record_iterates else None
         start = None if initial is None else self._initial_array(initial)
-        sol = self._solve_once(load, start, on_iteration, iterates, 0.0)
-        if self.accuracy is None or self.method != "emu":
-            return sol
-        # Accuracy as the knob (EMU): raise alpha until the error estimate is
-        # within ACCEPT x the target, warm-starting each re-solve; then guess
-        # the next solve's alpha from this one's estimate (a sequence's frames
-        # differ). error ~ alpha^-p with p between 0.3 and 1 (docs/DESIGN.md):
-        # p = 0.75 to raise (a retry where it is lower), p = 1 to lower.
-        target = self.accuracy
-        total_s, estimate_s, attempts = sol.time_s, sol.error_estimate_time_s, 1
-        iterations, cg, histories = sol.iterations, sol.cg_iterations, [sol.history]
-        phases = dict(sol.phase_times)
-        alpha_start, highest, before = self.alpha, self.alpha, None   # before: the estimate before a re-solve
-        stalled = False   # a re-solve at a larger alpha did not lower the estimate
-        while sol.converged and sol.error_estimate is not None and sol.error_estimate > ACCEPT * target:
-            own = sol.error_estimate   # a correction replaces it with its last step's length
-            stalled = before is not None and own > RESOLVE_GAIN * before
-            t0 = time.perf_counter()
-            corrected, closer = self._correct(load, sol, target) if self.fem_correction else (False, None)
-            estimate_s += time.perf_counter() - t0   # the correction counts as estimation time
-            # where x1 overshot (FEM's Newton not yet in its fast regime) the
-            # next alpha comes from EMU's distance to the later correction x3
-            # (docs/DESIGN.md, "Accuracy mode: FEM-corrected answers")
-            error = own if closer is None else closer
-            factor = min(30.0, max(1.5, (error / (AIM * target)) ** (1 / 0.75)))
-            if corrected:
-                # this answer is FEM-corrected; the next solve (a sequence's next
-                # frame) starts at the alpha a re-solve would have used, so that
-                # EMU's own answers stay near the target and corrections the
-                # exception (where raising alpha has not helped, at the alpha
-                # this solve started at)
-                self._set_alpha(alpha_start if stalled else self.alpha * factor)   # bounded below
-                if iterates is not None:   # the corrected answer, when it exists: after the estimates
-                    iterates.append((total_s + estimate_s, sol.positions))
-                break
-            # the error is not alpha's: without corrections no more raises (with
-            # them a larger alpha can still bring EMU's answer within reach of
-            # FEM's Newton steps: the stress test at activation 1e10), and none
-            # carried over to the next solve
-            if (stalled and not self.fem_correction) or attempts >= MAX_ALPHA_ATTEMPTS:
-                if stalled:
-                    self._set_alpha(alpha_start)
-                break
-            before, stalled = own, False
-            self._set_alpha(self.alpha * factor)
-            highest = self.alpha
-            # a warm start at a larger alpha: CG to the tight forcing term, so
-            # that the step test sees Newton steps (docs/DESIGN.md)
-            eta_max = self._core.cg_forcing_max
-            self._core.cg_forcing_max = min(eta_max, ACCURACY_CG_FORCING)
-            try:
-                sol = self._solve_once(load, self._initial_array(sol), on_iteration, iterates, total_s)
-            finally:
-                self._core.cg_forcing_max = eta_max
-            sol.history["time_s"] = sol.history["time_s"] + total_s
-            histories.append(sol.history)
-            total_s += sol.time_s
-            estimate_s += sol.error_estimate_time_s
-            iterations += sol.iterations
-            cg += sol.cg_iterations
-            phases = {name: phases[name] + sol.phase_times[name] for name in phases}
-            attempts += 1
-        # totals over the solves at each alpha (history: one block per solve, times cumulative)
-        sol.time_s, sol.error_estimate_time_s = total_s, estimate_s
-        sol.iterations, sol.cg_iterations, sol.phase_times = iterations, cg, phases
-        sol.history = {k: np.concatenate([h[k] for h in histories]) for k in histories[0]}
-        sol.settings["alpha_attempts"] = attempts
-        if sol.error_estimate is not None:
-            sol.accuracy_reached = bool(sol.error_estimate <= target)
-            if not sol.accuracy_reached:
-                # e.g. far past the activations that invert tets, where EMU and
-                # FEM find different inverted equilibria (docs/stability.md)
-                sol.error_estimate_note = f"accuracy {target:g} not reached: the error estimate is " \
-                    f"{sol.error_estimate:.2g}" + (
-                        f" after {attempts} alpha(s), up to alpha = {highest:.3g} mu" +
-                        ("; raising alpha did not lower it" if stalled else "") +
-                        "; use method='fem' for this load" if sol.converged
-                        else f" where the solve stopped ({sol.status})")
-                if sol.converged:   # a solve that stopped early says so in its status already
-                    warnings.warn(AccuracyWarning(sol.error_estimate_note), stacklevel=2)
-        if sol.error_estimate is not None and sol.error_estimate < AIM * target and not sol.corrected:
-            self._set_alpha(max(self.alpha * 0.5, self.alpha * sol.error_estimate / (AIM * target)))
-        if self.alpha > self._alpha_max:   # what the next solve starts at stays bounded
-            self._set_alpha(self._alpha_max)
+        self._observers = (on_iteration, iterates)
+        t0 = time.perf_counter()
+        sol = self._accuracy.solve(self, load, start, t0) if self._accuracy is not None else self._run(load, start, t0)
+        sol.time_s = time.perf_counter() - t0   # the whole solve, estimates and corrections included
+        sol.phase_times["other"] = max(0.0, sol.time_s - sum(v for k, v in sol.phase_times.items() if k != "other"))
         return sol
-
-    def _correct(self, load, sol: Solution, target: float) -> tuple:
-        """Accuracy mode, EMU's estimate above ACCEPT x target: FEM Newton
-        corrections x2 of the estimate's x1 and x3 of x2. If they contract
-        (|x2 - x1| <= CORRECTION_CONTRACTION |x1 - x|, within ACCEPT x target,
-        and |x3 - x2| <= CORRECTION_CONTRACTION |x2 - x1|: FEM's Newton is in
-        its fast regime), make x2 the solution's positions with |x2 - x1| as
-        its estimate (x2 is closer than that where they contract) and return
-        (True, None). Else leave the solution as it was (the caller
-        re-solves at a larger alpha) and return (False, |x - x3|) where x1
-        overshot but the corrections then contract (|x2 - x1| shorter than
-        |x1 - x| though over CORRECTION_CONTRACTION of it, within ACCEPT x
-        target, and x3 contracting: x3 is then a closer FEM point than x1 to
-        choose the next alpha by; the third correction is the extra cost),
-        else (False, None)."""
-        def corrected(x):
-            """One FEM Newton correction of x on the estimator's factor, None if it fails."""
-            try:
-                y = self._estimator.newton_correction(load, x, max_steps=1)
-            except (RuntimeError, ValueError):   # ValueError: with contact, x has surfaces through each other
-                return None
-            return y if np.all(np.isfinite(y)) else None
-
-        x, x1, own = sol.positions, sol.fem_correction, sol.error_estimate   # own = vertex_error(x, x1)
-        if x1 is None or (x2 := corrected(x1)) is None:
-            return False, None
-        step = vertex_error(x1, x2)
-        # corrections that do not shrink, or stay longer than the target: no
-        # FEM point near enough to be worth a third
-        if not (step < own and step <= ACCEPT * target):
-            return False, None
-        # A short second step is no proof by itself: from a point where FEM's
-        # Newton converges only linearly (a soft valley), every step is short.
-        # The next step must contract again (fusiform_20k: steps of 2.6e-4 and
-        # 2.6e-4 while 2.3e-3 remained; docs/DESIGN.md).
-        x3 = corrected(x2)
-        if x3 is None or vertex_error(x2, x3) > CORRECTION_CONTRACTION * step:
-            return False, None
-        if step > CORRECTION_CONTRACTION * own:   # x1 overshot: EMU's answer is not corrected
-            return False, vertex_error(x, x3)
-        sol.positions, sol.corrected, sol.error_estimate = x2, True, step
-        sol.error_estimate_note = (f"EMU's answer (estimated {own:.2g} from FEM's) corrected by two FEM Newton "
-                                   "steps; the estimate is the last step's length")
-        sol.inverted_tets = len(inverted_tets(self.scene.tets, x2))
-        return True, None
 
     def structures(self) -> dict:
         """{name: bytes} of what this solver built for its scene (per-solve work
@@ -720,7 +576,8 @@ class Solver:
         following solves; nothing is refactorised. With ``accuracy`` the alpha
         carried from solve to solve stays within 1e4 x max(alpha, 100)."""
         self._set_alpha(alpha)
-        self._alpha_max = ALPHA_MAX_RATIO * max(self.alpha, DEFAULT_ALPHA)
+        if self._accuracy is not None:
+            self._accuracy.bound_from(self.alpha)
 
     def _set_alpha(self, alpha: float) -> None:
         """set_alpha for accuracy mode's own changes (the bound stays)."""
@@ -731,6 +588,44 @@ class Solver:
         self._core.alpha = float(alpha) * self.mu_ref
         self.alpha = float(alpha)
         self.settings.update(alpha=self.alpha, alpha_absolute=self._core.alpha)
+
+    # The port accuracy mode drives (emu.accuracy): one solve, one FEM correction,
+    # tight CG, inverted tets.
+    def _run(self, load, start, t0: float) -> Solution:
+        """One solve from start (None: rest; a Solution or a start array as
+        _initial_array makes; (n, 3) positions: EMU from the deformation
+        gradients of those positions), with its error estimate (EMU); t0 the
+        perf_counter of the whole solve's start."""
+        if isinstance(start, Solution):
+            start = self._initial_array(start)
+        elif start is not None and np.shape(start) == self.scene.points.shape and self.method == "emu":
+            start = self._initial_array(deformation_gradients(self.scene.points, self.scene.tets, start))
+        on_iteration, iterates = self._observers
+        return self._solve_once(load, start, on_iteration, iterates, time.perf_counter() - t0)
+
+    def _correction(self, load, x):
+        """One FEM Newton correction of positions x by PCG on the estimator's
+        last factor (nothing factorised, no filtered fallback), None where that
+        fails: accuracy mode's corrections, certified only in Newton's regime."""
+        try:
+            y = self._estimator.newton_correction(load, x, hessian="lagged-newton", max_steps=1)
+        except (RuntimeError, ValueError):   # ValueError: with contact, x has surfaces through each other
+            return None
+        y = np.asarray(y)
+        return y if np.all(np.isfinite(y)) else None
+
+    @contextlib.contextmanager
+    def _tight_cg(self):
+        """CG to the forcing term ACCURACY_CG_FORCING inside the context."""
+        eta_max = self._core.cg_forcing_max
+        self._core.cg_forcing_max = min(eta_max, ACCURACY_CG_FORCING)
+        try:
+            yield
+        finally:
+            self._core.cg_forcing_max = eta_max
+
+    def _inverted(self, x) -> int:
+        return len(inverted_tets(self.scene.tets, x))
 
     def _solve_once(self, load, start, on_iteration, iterates, time_offset) -> Solution:
         settings = dict(self.settings)
@@ -758,16 +653,18 @@ class Solver:
         x1, estimate_s, note = (self._fem_correction_of(load, positions) if self.error_estimate
                                 else (None, 0.0, ""))
         estimate = None if x1 is None else vertex_error(positions, x1)
+        history["time_s"] = history["time_s"] + time_offset
         return Solution(method=self.method, positions=positions, converged=bool(r.converged),
                         status=r.status, iterations=r.iterations, cg_iterations=r.cg_iterations,
-                        time_s=r.time_s, setup_time_s=self.setup_time_s, energy=r.energy,
+                        time_s=r.time_s + estimate_s, solve_time_s=r.time_s, setup_time_s=self.setup_time_s,
+                        energy=r.energy,
                         grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
                         history=history, F=F, settings=settings, filtered_steps=r.filtered_steps,
                         exact_attempts_failed=r.exact_attempts_failed, factorizations=r.factorizations,
                         negative_curvature_steps=r.negative_curvature_steps,
                         neutral_modes=self._neutral_modes(r), iterates=iterates, error_estimate=estimate,
                         error_estimate_time_s=estimate_s, error_estimate_note=note,
-                        phase_times=_phase_times(r),
+                        phase_times=_phase_times(r, estimate_s),
                         inverted_tets=len(inverted_tets(self.scene.tets, positions)),
                         emu_positions=positions if self.method == "emu" else None, fem_correction=x1,
                         contact=self._contact_report(positions))

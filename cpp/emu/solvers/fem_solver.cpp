@@ -403,6 +403,17 @@ class FemSolver::Newton {
     if (lagged_indefinite_ && lagged_direction(false, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
     return filtered_direction() && slope() < 0;
   }
+  /// The exact Newton step by PCG on the lagged factor alone (no factorisation,
+  /// no filtered fallback): false where there is no lagged factor, PCG misses
+  /// its tolerance within the cap or meets negative curvature (x is not in
+  /// Newton's regime on that factor).
+  bool lagged_newton_direction() {
+    if (s_.has_contact() || s_.options_.lagged_cg_iterations <= 0 || !s_.lag_.valid) return false;
+    s_.assemble_hessian(x_, act_, true);
+    last_exact_ = true;
+    int cg = 0;
+    return lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0;
+  }
   /// Whether the last correction_direction used the exact element Hessians.
   bool last_direction_exact() const { return last_exact_; }
 
@@ -622,6 +633,14 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
     // factorised (a sequence's first frame at rest).
     if (newton.grad_norm() <= floor) {
       x = newton.positions();
+      break;
+    }
+    if (hessian == CorrectionHessian::LaggedNewton) {
+      if (!newton.lagged_newton_direction())
+        throw std::runtime_error("no lagged Newton correction from these positions: PCG on the last factor did "
+                                 "not converge or met negative curvature");
+      newton.trial_energy(1.0);
+      x = newton.trial_positions();
       break;
     }
     if (!newton.correction_direction(hessian != CorrectionHessian::Filtered))

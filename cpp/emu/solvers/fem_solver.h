@@ -38,7 +38,10 @@ class FemSolver {
   /// Which Newton matrix newton_correction uses: the exact one (where it is
   /// definite), the PSD-filtered one, or both and the step that ends at the
   /// lower FEM energy (measured to estimate EMU's error best: docs/DESIGN.md).
-  enum class CorrectionHessian { Exact, Filtered, LowerEnergy };
+  /// LaggedNewton: the exact Newton step by PCG on the last factorisation only,
+  /// nothing factorised; where that PCG fails no step (accuracy mode's cheap
+  /// corrections, which only Newton's regime can certify).
+  enum class CorrectionHessian { Exact, Filtered, LowerEnergy, LaggedNewton };
 
   /// Positions after full Newton steps of the FEM energy from x0 (#V by 3;
   /// each bone first at the best rigid fit of its rows): the linearised

@@ -130,7 +130,8 @@ def _compare(args):
         err = vertex_error(sol, fem)
         shortening = 1.0 - float(np.mean(sol.positions[tip, 2])) / length0
         summary["results"][sol.label] = dict(converged=sol.converged, iterations=sol.iterations,
-                                             cg_iterations=sol.cg_iterations, solve_s=sol.time_s,
+                                             cg_iterations=sol.cg_iterations, time_s=sol.time_s,
+                                             solve_s=sol.solve_time_s,
                                              setup_s=sol.setup_time_s, vertex_error_to_fem=err,
                                              shortening=shortening)
         if sol is not fem:

@@ -4,7 +4,8 @@ A sweep file (TOML or JSON):
 
     base = "arm.toml"                  # the scene file every case starts from (relative to this file)
     plot = "angle:forearm"             # the PNG's quantity: "angle:<bone>" (last frame, degrees),
-                                       # "error_estimate" (largest), "solve_s", "iterations"
+                                       # "error_estimate" (largest), "time_s" (the frames' solves,
+                                       # estimates included), "solve_s" (their iterations), "iterations"
     threads = 1                        # solver threads per case (OpenMP and BLAS)
 
     [grid]                             # every combination of these scene-file keys (dotted paths)
@@ -44,8 +45,8 @@ from .scenefile import SceneFileError, _read
 __all__ = ["sweep", "load_sweep", "SweepError", "RESULT_COLUMNS"]
 
 RESULT_COLUMNS = ("case", "status", "error", "frames", "converged_frames", "iterations", "cg_iterations",
-                  "solve_s", "error_estimate_s", "wall_s", "max_error_estimate", "plot_value", "output")
-PLOTS = ("solve_s", "iterations", "error_estimate")
+                  "time_s", "solve_s", "error_estimate_s", "wall_s", "max_error_estimate", "plot_value", "output")
+PLOTS = ("time_s", "solve_s", "iterations", "error_estimate")
 # statuses of a case that ran to its end (a re-run skips it): every frame
 # converged, or some did not (the case says so; running it again would not change that)
 FINISHED = ("done", "not converged")
@@ -149,6 +150,7 @@ def run_case(base: str, params: dict, out: str, plot: str, threads: int) -> dict
                    frames=len(frames), converged_frames=sum(f["converged"] for f in frames),
                    iterations=sum(f["iterations"] for f in frames),
                    cg_iterations=sum(f["cg_iterations"] for f in frames),
+                   time_s=sum(f["time_s"] for f in frames),
                    solve_s=sum(f["solve_s"] for f in frames),
                    error_estimate_s=sum(f.get("error_estimate_s", 0.0) for f in frames),
                    max_error_estimate=max(estimates) if estimates else "")

@@ -1,0 +1,201 @@
+"""Accuracy mode: EMU asked for a vertex error to FEM instead of an alpha.
+
+One solve of ``Solver(accuracy=e)`` is: solve at the current alpha, estimate
+the error to FEM (FEM's Newton correction x1 of EMU's answer x), and while
+the estimate is above ACCEPT x e either return EMU's answer corrected by
+FEM Newton steps (where those steps certify themselves by contracting) or
+raise alpha and solve again from x1; then carry an alpha over to the next
+solve. docs/DESIGN.md, "Accuracy as the knob", measures every rule here.
+
+The controller drives its solver through a small port (the Solver's methods):
+
+    port.alpha                       the current alpha (relative to mu_ref)
+    port._set_alpha(alpha)           alpha for the following solves
+    port._run(load, start, t0)       one EMU solve from start (None: rest; a
+                                     Solution: its F; (n, 3) positions: F of
+                                     those positions), with its error estimate;
+                                     t0 the perf_counter of the whole solve's
+                                     start (for iterate times)
+    port._correction(load, x)        one FEM Newton correction of positions x
+                                     (PCG on the estimator's factor only), or None
+    port._tight_cg()                 a context in which CG solves to the tight
+                                     forcing term ACCURACY_CG_FORCING
+    port._inverted(x)                the number of inverted tets at x
+    port.contact                     the scene's contact term (None: no contact)
+"""
+from __future__ import annotations
+
+import math
+import time
+import warnings
+
+import numpy as np
+
+from .geometry import vertex_error
+
+__all__ = ["AccuracyMode", "AccuracyWarning"]
+
+
+class AccuracyWarning(UserWarning):
+    """EMU with ``accuracy=``: the error estimate stayed above the accuracy asked
+    for after every alpha tried (see Solution.accuracy_reached)."""
+
+
+# Accept a solve whose error estimate is within ACCEPT x the target (the
+# estimate was measured at 0.65-1.35 x the true error), aim new alphas at AIM
+# x the target; stop iterating when a full step moves no vertex by more than
+# STEP_FRACTION x the target; at most MAX_ALPHA_ATTEMPTS solves per call.
+ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS = 0.6, 0.4, 0.1, 5
+# A re-solve warm-started from EMU's own F at a larger alpha runs CG to this
+# forcing term, so that the step test sees Newton steps (at 0.5 one CG
+# iteration there passed the test while missing a bone's turn). A re-solve
+# from x1 (FEM's correction: the bones already turned) needs no such cap.
+ACCURACY_CG_FORCING = 0.01
+# FEM-corrected answers: the corrections x2 of x1 and x3 of x2 must contract,
+# |x2 - x1| <= CORRECTION_CONTRACTION |x1 - x| (and within ACCEPT x target)
+# and |x3 - x2| <= CORRECTION_CONTRACTION |x2 - x1|.
+CORRECTION_CONTRACTION = 0.3
+# EMU without alpha or accuracy: accuracy = DEFAULT_ACCURACY, starting at DEFAULT_ALPHA.
+DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
+# The step test applies once |g| <= STEP_GRAD max(|g_0|, |g| at the cold start
+# under the same load) ...
+STEP_GRAD = 1e-2
+# ... and CG is asked for no more than Eisenstat-Walker's forcing term there.
+ACCURACY_CG_FORCING_MIN = math.sqrt(STEP_GRAD)
+# A re-solve at a larger alpha whose estimate is above RESOLVE_GAIN x the one
+# before shows the error is not alpha's: no more raises without FEM
+# corrections, and none carried over. The alpha carried to the next solve is
+# at most ALPHA_MAX_RATIO x max(the alpha given, DEFAULT_ALPHA).
+RESOLVE_GAIN, ALPHA_MAX_RATIO = 0.9, 1e4
+# error ~ alpha^-P_RAISE when raising (p from 0.3 to 1 measured: 0.75 makes a
+# second raise rare), ~ alpha^-1 when lowering; a raise is by a factor in
+# [RAISE_MIN, RAISE_MAX].
+P_RAISE, RAISE_MIN, RAISE_MAX = 0.75, 1.5, 30.0
+
+
+class AccuracyMode:
+    """The accuracy controller of one EMU Solver: its target, whether FEM
+    corrections are on, and the bound on the alpha it carries between solves."""
+
+    def __init__(self, target: float, fem_correction: bool, alpha: float):
+        self.target = float(target)
+        self.fem_correction = bool(fem_correction)
+        self.alpha_max = ALPHA_MAX_RATIO * max(alpha, DEFAULT_ALPHA)   # automatic raises stop there
+
+    def bound_from(self, alpha: float) -> None:
+        """The user set alpha: the carried alpha's bound moves with it."""
+        self.alpha_max = ALPHA_MAX_RATIO * max(alpha, DEFAULT_ALPHA)
+
+    def raise_factor(self, error: float) -> float:
+        """The factor on alpha that brings an error to AIM x target (error ~ alpha^-P_RAISE)."""
+        return min(RAISE_MAX, max(RAISE_MIN, (error / (AIM * self.target)) ** (1 / P_RAISE)))
+
+    def solve(self, port, load, start, t0: float):
+        """Solutions at increasing alphas until the estimate is within ACCEPT x
+        target (or corrected); returns the last with its totals over the solves."""
+        target = self.target
+        sol = port._run(load, start, t0)
+        runs = [sol]
+        estimate_s = sol.error_estimate_time_s
+        alpha_start = highest = port.alpha
+        before, stalled = None, False   # before: the estimate before a re-solve
+        while sol.converged and sol.error_estimate is not None and sol.error_estimate > ACCEPT * target:
+            own = sol.error_estimate   # a correction replaces it with its last step's length
+            stalled = before is not None and own > RESOLVE_GAIN * before
+            t1 = time.perf_counter()
+            corrected, closer = self.correct(port, load, sol) if self.fem_correction else (False, None)
+            estimate_s += time.perf_counter() - t1   # the corrections count as estimation time
+            # where x1 overshot, the next alpha comes from EMU's distance to x3
+            factor = self.raise_factor(own if closer is None else closer)
+            if corrected:
+                # the next solve (a sequence's next frame) starts at the alpha a
+                # re-solve would have used, so that EMU's own answers stay near
+                # the target and corrections the exception
+                port._set_alpha(alpha_start if stalled else port.alpha * factor)
+                if sol.iterates is not None:   # the corrected answer: after the estimates
+                    sol.iterates.append((time.perf_counter() - t0, sol.positions))
+                break
+            if (stalled and not self.fem_correction) or len(runs) >= MAX_ALPHA_ATTEMPTS:
+                if stalled:
+                    port._set_alpha(alpha_start)
+                break
+            before, stalled = own, False
+            port._set_alpha(port.alpha * factor)
+            highest = port.alpha
+            x1 = sol.fem_correction
+            if x1 is not None and port.contact is None:
+                # from FEM's correction: the positions are already near FEM's,
+                # EMU only settles at the new alpha (docs/DESIGN.md, "Re-solves from x1")
+                sol = port._run(load, x1, t0)
+            else:
+                with port._tight_cg():
+                    sol = port._run(load, sol, t0)
+            runs.append(sol)
+            estimate_s += sol.error_estimate_time_s
+        self._totals(sol, runs, estimate_s)
+        if sol.error_estimate is not None:
+            self._report(sol, len(runs), highest, stalled)
+        if sol.error_estimate is not None and sol.error_estimate < AIM * target and not sol.corrected:
+            port._set_alpha(max(port.alpha * 0.5, port.alpha * sol.error_estimate / (AIM * target)))
+        if port.alpha > self.alpha_max:   # what the next solve starts at stays bounded
+            port._set_alpha(self.alpha_max)
+        return sol
+
+    @staticmethod
+    def _totals(sol, runs, estimate_s) -> None:
+        """The last solution carries the totals over all solves (its history: one block per solve)."""
+        sol.solve_time_s = sum(r.solve_time_s for r in runs)
+        sol.error_estimate_time_s = estimate_s
+        sol.iterations = sum(r.iterations for r in runs)
+        sol.cg_iterations = sum(r.cg_iterations for r in runs)
+        sol.phase_times = {k: sum(r.phase_times[k] for r in runs) for k in runs[0].phase_times}
+        sol.phase_times["error_estimate"] = estimate_s
+        sol.history = {k: np.concatenate([r.history[k] for r in runs]) for k in runs[0].history}
+        sol.settings["alpha_attempts"] = len(runs)
+
+    def _report(self, sol, attempts: int, highest: float, stalled: bool) -> None:
+        target = self.target
+        sol.accuracy_reached = bool(sol.error_estimate <= target)
+        if sol.accuracy_reached:
+            return
+        # e.g. far past the activations that invert tets, where EMU and FEM
+        # find different inverted equilibria (docs/stability.md)
+        sol.error_estimate_note = f"accuracy {target:g} not reached: the error estimate is " \
+            f"{sol.error_estimate:.2g}" + (
+                f" after {attempts} alpha(s), up to alpha = {highest:.3g} mu" +
+                ("; raising alpha did not lower it" if stalled else "") +
+                "; use method='fem' for this load" if sol.converged
+                else f" where the solve stopped ({sol.status})")
+        if sol.converged:   # a solve that stopped early says so in its status already
+            warnings.warn(AccuracyWarning(sol.error_estimate_note), stacklevel=4)
+
+    def correct(self, port, load, sol) -> tuple:
+        """EMU's estimate above ACCEPT x target: FEM Newton corrections x2 of the
+        estimate's x1 and x3 of x2. If they contract (|x2 - x1| <=
+        CORRECTION_CONTRACTION |x1 - x|, within ACCEPT x target, and |x3 - x2|
+        <= CORRECTION_CONTRACTION |x2 - x1|: FEM's Newton is in its fast
+        regime), x2 becomes the solution's positions with |x2 - x1| as its
+        estimate, and (True, None) is returned. Otherwise the solution is left
+        as it was and (False, |x - x3|) is returned where x1 overshot but the
+        corrections then contract (x3 is a closer FEM point to choose the next
+        alpha by), else (False, None)."""
+        target = self.target
+        x, x1, own = sol.positions, sol.fem_correction, sol.error_estimate   # own = vertex_error(x, x1)
+        if x1 is None or (x2 := port._correction(load, x1)) is None:
+            return False, None
+        step = vertex_error(x1, x2)
+        # corrections that do not shrink, or stay longer than the target: no
+        # FEM point near enough to be worth a third
+        if not (step < own and step <= ACCEPT * target):
+            return False, None
+        # a short second step is no proof by itself: the next must contract again
+        x3 = port._correction(load, x2)
+        if x3 is None or vertex_error(x2, x3) > CORRECTION_CONTRACTION * step:
+            return False, None
+        if step > CORRECTION_CONTRACTION * own:   # x1 overshot: EMU's answer is not corrected
+            return False, vertex_error(x, x3)
+        sol.positions, sol.corrected, sol.error_estimate = x2, True, step
+        sol.error_estimate_note = (f"EMU's answer (estimated {own:.2g} from FEM's) corrected by two FEM Newton "
+                                   "steps; the estimate is the last step's length")
+        sol.inverted_tets = port._inverted(x2)
+        return True, None
