@@ -67,6 +67,12 @@ ACCURACY_CG_FORCING_MIN = math.sqrt(STEP_GRAD)
 # corrections, and none carried over. The alpha carried to the next solve is
 # at most ALPHA_MAX_RATIO x max(the alpha given, DEFAULT_ALPHA).
 RESOLVE_GAIN, ALPHA_MAX_RATIO = 0.9, 1e4
+# The next solve's alpha is lowered (at most by half, towards AIM x target)
+# where the estimate is below AIM x target, but not below ALPHA_MIN: where
+# geometry, not alpha, sets the error (a bone's turn) the estimate stays low
+# whatever alpha, which halved alpha every frame down to 0.1 mu and slowed
+# every solve (docs/DESIGN.md, "Accuracy as the knob").
+ALPHA_MIN = 10.0
 # error ~ alpha^-P_RAISE when raising (p from 0.3 to 1 measured: 0.75 makes a
 # second raise rare), ~ alpha^-1 when lowering; a raise is by a factor in
 # [RAISE_MIN, RAISE_MAX].
@@ -136,7 +142,8 @@ class AccuracyMode:
         if sol.error_estimate is not None:
             self._report(sol, len(runs), highest, stalled)
         if sol.error_estimate is not None and sol.error_estimate < AIM * target and not sol.corrected:
-            port._set_alpha(max(port.alpha * 0.5, port.alpha * sol.error_estimate / (AIM * target)))
+            lower = max(port.alpha * 0.5, port.alpha * sol.error_estimate / (AIM * target))
+            port._set_alpha(max(lower, min(port.alpha, ALPHA_MIN)))
         if port.alpha > self.alpha_max:   # what the next solve starts at stays bounded
             port._set_alpha(self.alpha_max)
         return sol

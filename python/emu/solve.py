@@ -359,6 +359,11 @@ class Solver:
             if int(lagged_cg_iterations) < 1:
                 raise ValueError(f"lagged_cg_iterations must be >= 1, got {lagged_cg_iterations}")
             opts.lagged_cg_iterations = int(lagged_cg_iterations)
+            if self.accuracy is not None:
+                # PCG's forcing term at most sqrt(STEP_GRAD) = 0.1: where the step test
+                # applies its steps are then Newton steps (at 0.5 big_muscle_free's
+                # soft twist gave short steps and a stop 1.02% from the answer)
+                opts.lagged_cg_forcing = ACCURACY_CG_FORCING_MIN
             self.settings.update(lagged_factor=True, lagged_cg_iterations=int(lagged_cg_iterations))
         self.contact = None   # the ContactTerm of a scene with contact (scene.enable_contact)
         if scene.contact is not None:
