@@ -108,9 +108,10 @@ def test_correct_on_synthetic_corrections():
     moving one vertex along x by the given fractions of the diagonal): the
     corrections contract -> corrected, positions x2, estimate |x2 - x1|; x1
     overshot (the second step 0.33 of the first) and the third contracts ->
-    not corrected, |x - x3| returned for the next alpha; a third step that
-    does not contract, or a second as long as the first (no third asked) ->
-    (False, None)."""
+    not corrected, |x - x3| returned for the next alpha; steps that neither
+    contract nor get under STEP_FRACTION x target within MAX_CORRECTIONS, or
+    a second as long as the first (no third asked) -> (False, None); a later
+    step that short -> corrected there."""
     import dataclasses
     from emu.geometry import bbox_diagonal
     s = fusiform(1, warn=False)
@@ -146,8 +147,15 @@ def test_correct_on_synthetic_corrections():
     (ok, closer), trial, _ = run(0.012, {0.012: 0.008, 0.008: 0.0085})
     assert not ok and closer == emu.vertex_error(x, at(0.0085)) and not trial.corrected
     assert trial.positions is x and trial.error_estimate == emu.vertex_error(x, at(0.012))
-    (ok, closer), _, _ = run(0.012, {0.012: 0.008, 0.008: 0.0105})
-    assert not ok and closer is None
+    # no contraction and no short step within MAX_CORRECTIONS (4) corrections: none taken
+    (ok, closer), _, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0075, 0.0075: 0.0102})
+    assert not ok and closer is None and calls == 4
+    # no contraction, but the fourth correction moves under STEP_FRACTION x target (FEM's own
+    # accuracy stop): its result, with the last two steps summed as the estimate
+    (ok, closer), trial, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0100})
+    assert ok and closer is None and trial.corrected and calls == 3
+    assert np.array_equal(trial.positions, at(0.0100))
+    assert trial.error_estimate == (emu.vertex_error(at(0.008), at(0.0105)) + emu.vertex_error(at(0.0105), at(0.0100)))
     (ok, closer), _, calls = run(0.01, {0.01: 0.0})
     assert not ok and closer is None and calls == 1
 

@@ -76,6 +76,9 @@ def test_emu_solve_a_labelled_mesh(tmp_path):
     np.testing.assert_allclose(act[s.parts["belly"].tets], 1e4)
     np.testing.assert_array_equal(act[s.parts["proximal"].tets], 0.0)
     assert np.abs(sol.point_data["displacement"]).max() > 1e-3
+    assert "hint" not in r.stdout          # FEM is the faster method at this size: no hint
+    r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--method", "emu")
+    assert r.returncode == 0 and "hint: at " in r.stdout and "method='fem'" in r.stdout, r.stdout
 
 
 def test_emu_info_on_a_scene_file(tmp_path):

@@ -23,7 +23,7 @@ LAYERS = {
     # the scene, its parts and joints, the lowering to the C++ model, built-in scenes
     "model": {"parts", "joints", "contact", "scene", "lowering", "scenes"},
     # solving a scene and measuring a solution
-    "solve": {"accuracy", "solve", "bones"},
+    "solve": {"accuracy", "advice", "solve", "bones"},
     # files in and out (never the solver)
     "io": {"io", "io.mesh", "io.vtk", "io.obj", "io.plots", "datasets"},
     # the application: command line, scene files, runs, the demo

@@ -25,6 +25,7 @@ import warnings
 import numpy as np
 
 from .. import datasets
+from ..advice import method_hint
 from ..geometry import vertex_error
 from ..io.mesh import load_scene
 from ..io.vtk import write_solution
@@ -182,6 +183,9 @@ def _solve(args):
     solver = Solver(scene, args.method, **kw)
     sol = solver.solve(act)
     print(sol.summary())
+    hint = method_hint(scene, args.method)
+    if hint:
+        print(hint)
     if args.out:
         write_solution(args.out, scene, sol, activation=act, fibers=solver.fibers)
         print(f"wrote {args.out}")

@@ -10,6 +10,7 @@ import json
 import os
 import time
 
+from ..advice import method_hint
 from ..bones import bone_angle
 from ..io.obj import boundary_faces, write_obj
 from ..io.vtk import write_pvd, write_solution
@@ -34,6 +35,10 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
     prev = None
     t_start = time.perf_counter()
     progress(f"{spec.scene}; {spec.frames} frame(s), {solver.method} (setup {solver.setup_time_s:.2f} s)")
+    hint = method_hint(spec.scene, solver.method, sequence=spec.frames > 1)
+    if hint:
+        progress(hint)
+    log["method_hint"] = hint
     try:
         for k in range(spec.frames):
             act = spec.activation(k)

@@ -1,0 +1,29 @@
+"""The method hint: the faster method by the measured crossover (emu.advice),
+printed by `emu solve`, `emu run` and the demo (tests/test_cli.py)."""
+from __future__ import annotations
+
+import emu
+from emu import advice
+
+
+def test_the_hint_names_the_faster_method_by_soft_tets(monkeypatch):
+    s = emu.scenes.arm(1)
+    soft = sum(len(p.tets) for p in s.parts.values() if p.kind != "bone")
+    assert advice.soft_tets(s) == soft < len(s.tets)          # bone tets do not count
+    assert advice.faster_method(s) == "fem" and advice.method_hint(s, "fem") is None
+    hint = advice.method_hint(s, "emu", sequence=True)
+    assert "FEM is faster" in hint and "frames of a sequence" in hint and f"{soft:,} soft tets" in hint
+    monkeypatch.setitem(advice.EMU_FROM_SOFT_TETS, "single", soft)   # the crossover at this size
+    assert advice.faster_method(s) == "emu" and advice.method_hint(s, "emu") is None
+    assert "EMU is faster" in advice.method_hint(s, "fem")
+    assert advice.method_hint(s, "fem", sequence=True) is None      # the sequence crossover is apart
+
+
+def test_run_logs_the_hint(tmp_path):
+    from test_scenefile import GOOD, write
+    from emu.app.run import run_scene
+    from emu.app.scenefile import load_scene_file
+
+    lines = []
+    log = run_scene(load_scene_file(write(tmp_path, GOOD)), str(tmp_path / "out"), progress=lines.append)
+    assert log["method_hint"] is not None and log["method_hint"] in lines
