@@ -152,8 +152,9 @@ def main(argv=None):
 
     os.makedirs(a.out, exist_ok=True)
     info = emu.info()
-    kind = f"sequences of {a.frames} frames, seconds per frame once warm" if a.frames else "single solves from rest, seconds"
-    print(f"emu {info['version']}; BLAS {info['config']}; {time.strftime('%Y-%m-%d')}; {kind}, setup included; "
+    kind = (f"sequences of {a.frames} frames, seconds per frame once warm (frames 2..{a.frames})" if a.frames
+            else "single solves from rest, seconds, setup included")
+    print(f"emu {info['version']}; BLAS {info['config']}; {time.strftime('%Y-%m-%d')}; {kind}; "
           "(largest vertex error to strict FEM / diagonal)\n")
     head = "| scene | tets | threads | accuracy | FEM | lagged FEM | EMU (attempts, estimate s) | faster FEM / EMU |"
     head += " EMU hindsight s | EMU / hindsight |" if a.hindsight and not a.frames else ""

@@ -12,11 +12,15 @@ def test_the_hint_names_the_faster_method_by_soft_tets(monkeypatch):
     assert advice.soft_tets(s) == soft < len(s.tets)          # bone tets do not count
     assert advice.faster_method(s) == "fem" and advice.method_hint(s, "fem") is None
     hint = advice.method_hint(s, "emu", sequence=True)
-    assert "FEM is faster" in hint and "frames of a sequence" in hint and f"{soft:,} soft tets" in hint
-    monkeypatch.setitem(advice.EMU_FROM_SOFT_TETS, "single", soft)   # the crossover at this size
+    assert "FEM is as fast" in hint and "frames of a sequence" in hint and f"{soft:,} soft tets" in hint
+    assert "with a moving bone" in hint                               # the arm's forearm moves
+    monkeypatch.setitem(advice.EMU_FROM_SOFT_TETS, ("bones", "single"), soft)   # the crossover at this size
     assert advice.faster_method(s) == "emu" and advice.method_hint(s, "emu") is None
     assert "EMU is faster" in advice.method_hint(s, "fem")
     assert advice.method_hint(s, "fem", sequence=True) is None      # the sequence crossover is apart
+    assert "slower at every size measured" in advice.method_hint(s, "emu", sequence=True)
+    fusiform = emu.scenes.fusiform(1, warn=False)                     # no bone: the other crossover
+    assert advice.faster_method(fusiform) == "fem" and "without moving bones" in advice.method_hint(fusiform, "emu")
 
 
 def test_run_logs_the_hint(tmp_path):

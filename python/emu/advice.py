@@ -9,11 +9,16 @@ them the hint names FEM.
 """
 from __future__ import annotations
 
-__all__ = ["soft_tets", "faster_method", "method_hint", "EMU_FROM_SOFT_TETS"]
+__all__ = ["soft_tets", "faster_method", "method_hint", "EMU_FROM_SOFT_TETS", "MEASURED_UP_TO"]
 
-# soft (muscle and tendon) tets from which EMU as shipped was the faster
-# method: single solves from rest, and the warm frames of a sequence
-EMU_FROM_SOFT_TETS = {"single": 80_000, "sequence": 80_000}
+# soft (muscle and tendon) tets from which EMU as shipped was faster than the
+# faster FEM baseline, by scene kind (with or without a bone the muscles
+# move) and use (single solves from rest, or the warm frames of a sequence);
+# None: EMU was slower at every size measured, up to MEASURED_UP_TO
+EMU_FROM_SOFT_TETS = {("muscles", "single"): 40_000, ("muscles", "sequence"): None,
+                      ("bones", "single"): 80_000, ("bones", "sequence"): None}
+MEASURED_UP_TO = {("muscles", "single"): 585_336, ("muscles", "sequence"): 81_000,
+                  ("bones", "single"): 113_724, ("bones", "sequence"): 53_508}
 
 
 def soft_tets(scene) -> int:
@@ -21,21 +26,29 @@ def soft_tets(scene) -> int:
     return int(sum(len(p.tets) for p in scene.parts.values() if p.kind != "bone"))
 
 
+def _key(scene, sequence: bool) -> tuple:
+    return ("bones" if scene.movable_bones else "muscles", "sequence" if sequence else "single")
+
+
 def faster_method(scene, sequence: bool = False) -> str:
-    """"emu" or "fem": the method measured faster at this scene's size (see module)."""
-    return "emu" if soft_tets(scene) >= EMU_FROM_SOFT_TETS["sequence" if sequence else "single"] else "fem"
+    """"emu" or "fem": the method measured faster at this scene's size and kind (see module)."""
+    limit = EMU_FROM_SOFT_TETS[_key(scene, sequence)]
+    return "emu" if limit is not None and soft_tets(scene) >= limit else "fem"
 
 
 def method_hint(scene, method: str, sequence: bool = False) -> str | None:
     """A one-line hint where ``method`` is on the slower side of the measured
-    crossover for this scene's size, naming the faster one; None otherwise."""
+    crossover for this scene's size and kind, naming the faster one; None otherwise."""
     faster = faster_method(scene, sequence)
     if faster == method:
         return None
-    n, limit = soft_tets(scene), EMU_FROM_SOFT_TETS["sequence" if sequence else "single"]
+    key = _key(scene, sequence)
+    n, limit = soft_tets(scene), EMU_FROM_SOFT_TETS[key]
+    kind = "with a moving bone" if key[0] == "bones" else "without moving bones"
     what = "frames of a sequence" if sequence else "single solves"
+    where = (f"measured crossover for scenes {kind}: {limit:,} soft tets" if limit is not None else
+             f"for scenes {kind} EMU was slower at every size measured, up to {MEASURED_UP_TO[key]:,} soft tets")
     if faster == "fem":
-        return (f"hint: at {n:,} soft tets FEM is faster than EMU for {what} (measured crossover: {limit:,} "
-                "soft tets): method='fem', or with lagged_factor=True")
-    return (f"hint: at {n:,} soft tets EMU is faster than FEM for {what} (measured crossover: {limit:,} soft tets): "
-            "method='emu'")
+        return (f"hint: at {n:,} soft tets FEM is as fast as EMU or faster for {what} ({where}): "
+                "method='fem', or with lagged_factor=True")
+    return f"hint: at {n:,} soft tets EMU is faster than FEM for {what} ({where}): method='emu'"

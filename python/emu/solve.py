@@ -139,7 +139,7 @@ class Solution:
         if self.accuracy_reached is False:
             est += f" ({self.error_estimate_note})"
         if self.corrected:
-            est += " (EMU's answer corrected by two FEM Newton steps)"
+            est += " (EMU's answer corrected by FEM Newton steps)"
         return (f"{self.label}: {state} in {self.iterations} iterations{cg}, "
                 f"{self.time_s:.3f} s{self._parts()} (+{self.setup_time_s:.3f} s setup), |g|/|g0| = "
                 f"{self.grad_norm / self.grad_norm0 if self.grad_norm0 else 0:.2e}{est}")

@@ -96,7 +96,7 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float | Non
         corrected = [summary["fem_corrected"][k] for k in done]
         if any(corrected):
             progress(f"  {sum(corrected)} of {len(done)} frames FEM-corrected (EMU's estimate missed the accuracy; "
-                     "its answer corrected by two FEM Newton steps instead of a re-solve)")
+                     "its answer corrected by FEM Newton steps instead of a re-solve)")
         # the estimate of EMU's own answers (a corrected frame's is the last correction step's length)
         est = [summary["emu_error_estimate"][k] for k in done]
         ratios = [e / t for e, t, c in zip(est, errors, corrected) if e is not None and t > 1e-6 and not c]
