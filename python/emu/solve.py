@@ -77,10 +77,11 @@ class Solution:
     emu_positions  EMU: its own answer, the ACAP fit x*(F) of its unknowns F
                 (None for FEM); ``positions`` is the same array unless corrected
     corrected   EMU with ``accuracy=``: True where ``positions`` are EMU's answer
-                corrected by two FEM Newton steps (the step the error estimate
-                computes, and one more), because EMU's own estimate missed the
-                accuracy and those steps converge; error_estimate is then
-                |x2 - x1|, the last step's length (see Solver's fem_correction)
+                corrected by FEM Newton steps (the step the error estimate
+                computes, then exact Newton steps on the estimator's factor),
+                because EMU's own estimate missed the accuracy and those steps
+                converge (emu.accuracy.AccuracyMode.correct); error_estimate is
+                then the length of the last step(s)
     contact     scenes with contact (Scene.enable_contact): {"pairs": point-triangle and
                 edge-edge pairs within the barrier's reach, "min_distance": the smallest
                 gap between surfaces that may touch (inf: none within reach),
@@ -248,9 +249,10 @@ class Solver:
                   diagonal (0.01: 1%; EMU's default), instead of a tolerance: both methods stop
                   when a full Newton step moves no vertex by more than a tenth
                   of it; EMU also picks alpha (starting from ``alpha``) so that
-                  its error estimate is within 0.6 x accuracy, re-solving
-                  warm-started at a larger alpha when it is not, and carries
-                  the alpha over to the next solve (``solver.alpha``); a re-solve
+                  its error estimate is within 0.6 x accuracy, re-solving at a
+                  larger alpha from the estimate's FEM correction when it is not, and
+                  carries the alpha over to the next solve (``solver.alpha``, at
+                  least 10 mu when lowered); a re-solve
                   that does not lower the estimate by a tenth is not carried over (the next
                   solve starts where this one did; without ``fem_correction`` it
                   ends the raises), and the alpha carried over is at most
@@ -261,8 +263,8 @@ class Solver:
                   two of eight scenes and worse far past inversion: docs/DESIGN.md)
     fem_correction  EMU with ``accuracy``: where EMU's estimate misses the accuracy,
                   return its answer corrected by FEM Newton steps (the one the
-                  estimate computed and one more, on the estimator's lagged
-                  factor) when they converge, instead of re-solving at a larger
+                  estimate computed, then up to three exact ones on the estimator's
+                  lagged factor) when they converge, instead of re-solving at a larger
                   alpha (Solution.corrected; docs/DESIGN.md measures both). None (default): on,
                   but off for scenes with contact (those Newton steps know no collision
                   detection; True forces it)
