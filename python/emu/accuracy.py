@@ -3,9 +3,10 @@
 One solve of ``Solver(accuracy=e)`` is: solve at the current alpha, estimate
 the error to FEM (FEM's Newton correction x1 of EMU's answer x), and while
 the estimate is above ACCEPT x e either return EMU's answer corrected by
-FEM Newton steps (where those steps certify themselves by contracting) or
-raise alpha and solve again from x1; then carry an alpha over to the next
-solve. docs/DESIGN.md, "Accuracy as the knob", measures every rule here.
+FEM Newton steps (where those steps certify themselves: they contract, or
+one is as short as FEM's own accuracy stop asks) or raise alpha and solve
+again from x1; then carry an alpha over to the next solve. docs/DESIGN.md,
+"Accuracy as the knob" and "Accuracy mode as shipped", measure every rule here.
 
 The controller drives its solver through a small port (the Solver's methods):
 
@@ -134,7 +135,7 @@ class AccuracyMode:
             x1 = sol.fem_correction
             if x1 is not None and port.contact is None:
                 # from FEM's correction: the positions are already near FEM's,
-                # EMU only settles at the new alpha (docs/DESIGN.md, "Re-solves from x1")
+                # EMU only settles at the new alpha (docs/DESIGN.md, "Accuracy mode as shipped")
                 sol = port._run(load, x1, t0)
             else:
                 with port._tight_cg():
@@ -198,11 +199,11 @@ class AccuracyMode:
         x, x1, own = sol.positions, sol.fem_correction, sol.error_estimate   # own = vertex_error(x, x1)
         if x1 is None or (x2 := port._correction(load, x1)) is None:
             return False, None
+        points, steps = [x1, x2], [vertex_error(x1, x2)]
         # corrections that do not shrink, or stay longer than the target: no
         # FEM point near enough to be worth another
-        if not (vertex_error(x1, x2) < own and vertex_error(x1, x2) <= ACCEPT * target):
+        if not (steps[0] < own and steps[0] <= ACCEPT * target):
             return False, None
-        points, steps = [x1, x2], [vertex_error(x1, x2)]
         while len(steps) < MAX_CORRECTIONS:
             y = port._correction(load, points[-1])
             if y is None:

@@ -13,9 +13,8 @@ from . import _core
 from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, DEFAULT_ACCURACY,
                        DEFAULT_ALPHA, STEP_FRACTION, STEP_GRAD, AccuracyMode, AccuracyWarning)
 from .checks import inverted_tets
-from .geometry import deformation_gradients
 from .contact import ContactTerm
-from .geometry import bbox_diagonal, tet_vertices, vertex_error
+from .geometry import bbox_diagonal, deformation_gradients, tet_vertices, vertex_error
 from .lowering import build_model, declared_joint_rows, declared_joint_world, model_tet_order
 from .poses import parse_pose
 from .runtime import set_threads
@@ -167,8 +166,8 @@ def _phase_times(r, estimate_s: float) -> dict:
     """Solution.phase_times of one solve from a core SolveResult and its estimate's seconds
     (other: the rest of the solver's time; Solver.solve makes it the rest of the whole)."""
     times = {name: float(getattr(r.phases, name)) for name in PHASES}
+    times["other"] = max(0.0, float(r.time_s) - sum(times.values()))
     times["error_estimate"] = float(estimate_s)
-    times["other"] = max(0.0, float(r.time_s) - sum(times.values()) + estimate_s)
     return times
 
 
