@@ -19,13 +19,13 @@ PACKAGE = Path(__file__).resolve().parents[1] / "python" / "emu"
 # layer -> modules (names relative to emu; "" is the package itself)
 LAYERS = {
     # numerics and data with no notion of a scene
-    "core": {"_core", "geometry", "checks", "activation", "poses", "meshes", "fibers", "runtime"},
+    "core": {"_core", "geometry", "checks", "activation", "poses", "meshes", "fibers", "runtime", "shapes"},
     # the scene, its parts and joints, the lowering to the C++ model, built-in scenes
     "model": {"parts", "joints", "contact", "scene", "lowering", "scenes"},
     # solving a scene and measuring a solution
     "solve": {"accuracy", "advice", "solve", "bones"},
     # files in and out (never the solver)
-    "io": {"io", "io.mesh", "io.vtk", "io.obj", "io.plots", "datasets"},
+    "io": {"io", "io.mesh", "io.vtk", "io.obj", "io.plots", "datasets", "author"},
     # the application: command line, scene files, runs, the demo
     "app": {"app", "app.cli", "app.run", "app.demo", "app.scenefile", "app.sweep"},
     # the public facade and the import paths the README and pyproject.toml name

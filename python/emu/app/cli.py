@@ -219,6 +219,20 @@ def _sweep(args):
     return 0 if all(r["status"] == "done" for r in rows) else 1
 
 
+def _mesh(args):
+    from ..author import author, format_report, write_authored
+
+    try:
+        result = author(args.parts, quiet=not args.verbose, threads=args.threads or 0)
+    except ImportError as e:
+        print(f"emu: error: {e}", file=sys.stderr)
+        return 2
+    paths = write_authored(result, args.out)
+    print(format_report(result.report))
+    print(f"wrote {paths['mesh']}, {paths['scene']} (a scene file: emu info / emu run it)")
+    return 0
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="emu", description="EMU muscle simulation (and its FEM reference)")
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -274,6 +288,14 @@ def main(argv=None):
     w.add_argument("--threads", type=int, default=None, help="solver threads per case (default: the sweep "
                                                              "file's, 1)")
     w.set_defaults(func=_sweep)
+    m = sub.add_parser("mesh", help="mesh one closed surface per part (a parts file, TOML) into one labelled "
+                                    "tet mesh and a scene file (needs emu[mesh]: fTetWild)")
+    m.add_argument("parts", help="the parts file: [mesh] tets or edge_length, [[part]] name/surface/kind, "
+                                 "optional [[joint]] (emu.author)")
+    m.add_argument("--out", required=True, help="output folder: mesh.vtu, scene.json, scene.toml, report.json")
+    m.add_argument("--threads", type=int, default=None, help="mesher threads (default: all cores)")
+    m.add_argument("--verbose", action="store_true", help="show the mesher's own progress")
+    m.set_defaults(func=_mesh)
     i = sub.add_parser("info", help="BLAS, threads; with a mesh or scene file: parts, attachments, defects, "
                                     "memory estimate")
     i.add_argument("mesh", nargs="?", help="a labelled mesh (.vtu, ...) or a scene file (.toml, .json)")
