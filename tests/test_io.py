@@ -207,3 +207,21 @@ def test_boundary_surface_is_closed_and_outward():
     p = m.points
     vol = np.einsum("ij,ij->i", p[f[:, 0]], np.cross(p[f[:, 1]], p[f[:, 2]])).sum() / 6.0
     assert vol == pytest.approx(emu.checks.signed_volumes(p, m.tets).sum(), rel=1e-10)  # outward normals
+
+
+def test_gmsh_physical_names_name_the_parts(tmp_path, mesh):
+    """A gmsh mesh with physical groups "belly" and "tendons" (gmsh's own
+    format 2.2 as meshio writes it): the parts carry those names."""
+    import meshio
+
+    m, part = mesh
+    path = tmp_path / "named.msh"
+    tag = part + 1   # gmsh tags start at 1
+    meshio.write(path, meshio.Mesh(m.points, [("tetra", m.tets)],
+                                   cell_data={"gmsh:physical": [tag], "gmsh:geometrical": [tag]},
+                                   field_data={"belly": np.array([1, 3]), "tendons": np.array([2, 3]),
+                                               "skin": np.array([7, 2])}),
+                 file_format="gmsh22")
+    back = emu.io.read(path)
+    assert back.part_names == {1: "belly", 2: "tendons"}   # the surface group "skin" names no part
+    np.testing.assert_array_equal(back.part, tag)

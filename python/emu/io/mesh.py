@@ -2,8 +2,11 @@
 
 ``read`` keeps only the tetrahedra and their cell data; a ``part`` label comes
 from cell data named ``part`` (the shared scenes), ``gmsh:physical`` (gmsh
-physical groups) or ``medit:ref`` (Medit references). A ``scene.json`` beside
-the file (the shared scenes' format) names the parts and their kinds.
+physical groups, named by their physical names where the file has them) or
+``medit:ref`` (Medit references). A ``scene.json`` beside the file (the
+shared scenes' format, and what `emu mesh` writes) names the parts and their
+kinds: ``{"parts": [{"id": 0, "name": "humerus", "kind": "bone"}, ...]}``;
+it overrides the file's names.
 """
 from __future__ import annotations
 
@@ -64,6 +67,12 @@ def read(path) -> TetMesh:
         arrs = [np.asarray(per_block[i]) for i in blocks]
         cell_data[name] = np.concatenate(arrs)
     out = TetMesh(points=np.asarray(mesh.points, dtype=np.float64)[:, :3].copy(), tets=tets, cell_data=cell_data)
+    if "gmsh:physical" in cell_data and "part" not in cell_data:
+        # gmsh physical names: field data {name: [tag, dimension]}; the volumes' name the parts
+        for name, (tag, dim) in ((k, np.asarray(v).ravel()[:2]) for k, v in (mesh.field_data or {}).items()
+                                 if np.asarray(v).size >= 2):
+            if int(dim) == 3:
+                out.part_names[int(tag)] = str(name)
     meta = os.path.join(os.path.dirname(path), "scene.json")
     if os.path.exists(meta):
         with open(meta) as f:
