@@ -242,3 +242,26 @@ def test_parts_file_errors_name_the_key(tmp_path, body, match):
     p.write_text(body + ('' if "[[part]]" in body else '[[part]]\nname = "a"\nsurface = "a.obj"\nkind = "muscle"\n'))
     with pytest.raises(AuthoringError, match=match):
         read_parts(p)
+
+
+def test_example_pipeline_surfaces_to_picture(tmp_path):
+    """examples/authoring: the committed surfaces -> emu mesh -> emu run (3
+    frames) -> the picture script; the forearm flexes (the elbow's angle grows)."""
+    import importlib.util
+    import json
+
+    from emu.app.cli import main
+
+    here = os.path.join(os.path.dirname(__file__), "..", "examples", "authoring")
+    out, run = tmp_path / "elbow", tmp_path / "elbow_run"
+    assert main(["mesh", os.path.join(here, "parts.toml"), "--out", str(out)]) == 0
+    text = (out / "scene.toml").read_text().replace("count = 20", "count = 3").replace("0.3]]", "1.0]]")
+    (out / "scene.toml").write_text(text)
+    assert main(["run", str(out / "scene.toml"), "--out", str(run)]) == 0
+    angles = [f["bone_angles_deg"]["forearm"] for f in json.loads((run / "log.json").read_text())["frames"]]
+    assert abs(angles[0]) < 1e-3 and angles[2] > angles[1] > 0.1
+    spec = importlib.util.spec_from_file_location("picture", os.path.join(here, "picture.py"))
+    picture = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(picture)
+    png = picture.main(str(out / "scene.toml"), str(run))
+    assert os.path.getsize(png) > 10_000

@@ -65,9 +65,13 @@ def test_emu_solve_a_labelled_mesh(tmp_path):
         {"id": 0, "name": "belly", "kind": "muscle"}, {"id": 1, "name": "proximal", "kind": "bone"},
         {"id": 2, "name": "distal", "kind": "bone"}]}))
     out = tmp_path / "sol.vtu"
-    # no fibre cell data: the loader needs fibers="laplace", and says so
+    # no fibre cell data: the loader needs the Laplace field (or a direction), and
+    # says how to ask for it on the command line; asked for, it solves
     r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--out", str(out))
-    assert r.returncode == 2 and "needs 'fiber' cell data" in r.stderr, r.stdout + r.stderr
+    assert r.returncode == 2 and "no 'fiber' cell data" in r.stderr and "--fibers belly=laplace" in r.stderr, \
+        r.stdout + r.stderr
+    r = emu_cli("solve", str(mesh), "--fibers", "belly=laplace", "--activation", "belly=1e4", "--method", "fem")
+    assert r.returncode == 0, r.stdout + r.stderr
     emu.io.write(mesh, m.points, m.tets, cell_data={"part": part, "fiber": np.tile([0.0, 0.0, 1.0], (len(m.tets), 1))})
     r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--method", "fem", "--out", str(out))
     assert r.returncode == 0, r.stdout + r.stderr

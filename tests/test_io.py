@@ -225,3 +225,77 @@ def test_gmsh_physical_names_name_the_parts(tmp_path, mesh):
     back = emu.io.read(path)
     assert back.part_names == {1: "belly", 2: "tendons"}   # the surface group "skin" names no part
     np.testing.assert_array_equal(back.part, tag)
+
+
+def _three_parts(m):
+    """The fusiform's belly (0) and its two tendon caps as parts 1 (proximal)
+    and 2 (distal), to be declared bones."""
+    z = m.points[m.tets].mean(axis=1)[:, 2]
+    return np.where(m.is_tendon, np.where(z < 0.5 * m.length, 1, 2), 0).astype(np.int32)
+
+
+def test_kinds_and_fibres_per_part(tmp_path, mesh):
+    """A mesh from another tool, labelled but with no scene.json: kinds= makes
+    the caps bones, fibers= gives the belly a Laplace field between them (the
+    fusiform's meridian fibres, which the mesh module makes independently) or a
+    direction; a name the mesh does not have is an error listing the parts."""
+    m, _ = mesh
+    part = _three_parts(m)
+    path = tmp_path / "three.vtu"
+    emu.io.write(path, m.points, m.tets, cell_data={"part": part})
+    kinds = {"part1": "bone", "part2": "bone"}
+    scene = emu.io.load_scene(path, kinds=kinds, fibers={"part0": "laplace"})
+    assert [p.kind for p in scene.parts.values()] == ["muscle", "bone", "bone"]
+    f = scene.parts["part0"].fibers
+    cos = np.abs(np.einsum("ij,ij->i", f, m.fibers[part == 0]))
+    assert np.median(cos) > 0.95
+    scene = emu.io.load_scene(path, kinds=kinds, fibers={"part0": [0, 0, 2.0]})
+    np.testing.assert_allclose(scene.parts["part0"].fibers, np.tile([0, 0, 1.0], (np.sum(part == 0), 1)))
+    with pytest.raises(ValueError, match="has no part named 'belly'.*parts: part0, part1, part2"):
+        emu.io.load_scene(path, kinds={"belly": "bone"})
+    with pytest.raises(ValueError, match="needs fibres and the mesh has no 'fiber' cell data.*--fibers part0=laplace"):
+        emu.io.load_scene(path, kinds=kinds)   # no fibres in the file, none asked for
+
+
+def test_scene_file_and_cli_set_kinds_and_fibres(tmp_path, mesh, capsys):
+    from emu.app.cli import main
+    from emu.app.scenefile import load_scene_file
+
+    m, _ = mesh
+    path = tmp_path / "three.vtu"
+    emu.io.write(path, m.points, m.tets, cell_data={"part": _three_parts(m)})
+    (tmp_path / "scene.toml").write_text('[mesh]\npath = "three.vtu"\n[parts.part1]\nkind = "bone"\n'
+                                         '[parts.part2]\nkind = "bone"\n[parts.part0]\nfibers = [0.0, 0.0, 1.0]\n')
+    spec = load_scene_file(tmp_path / "scene.toml")
+    assert spec.scene.parts["part2"].kind == "bone"
+    np.testing.assert_allclose(spec.scene.parts["part0"].fibers[:, 2], 1.0)
+    assert main(["info", str(path), "--kind", "part1=bone", "part2=bone", "--fibers", "part0=laplace"]) == 0
+    out = capsys.readouterr().out
+    assert "part part1: bone" in out and "attachments: part1" in out
+
+
+def test_cracks_are_named_and_welded(tmp_path, mesh):
+    """The proximal cap meshed apart from the belly (its vertices duplicated):
+    the belly and the cap touch without sharing a vertex, which load_scene names;
+    weld=True joins them again, with the attachment of the shared mesh."""
+    m, _ = mesh
+    part = _three_parts(m)
+    cap = part == 1
+    cap_vertices = np.unique(m.tets[cap])
+    copy = np.full(len(m.points), -1)
+    copy[cap_vertices] = len(m.points) + np.arange(len(cap_vertices))
+    points = np.vstack([m.points, m.points[cap_vertices]])
+    tets = m.tets.copy()
+    tets[cap] = copy[m.tets[cap]]
+    path = tmp_path / "cracked.vtu"
+    emu.io.write(path, points, tets, cell_data={"part": part})
+    kinds = {"part1": "bone", "part2": "bone"}
+    with pytest.warns(emu.MeshWarning, match="muscle 'part0' and bone 'part1' touch at [0-9]+ vertex pair"):
+        scene = emu.io.load_scene(path, kinds=kinds, fibers={"part0": [0, 0, 1.0]})
+    assert "part1" not in scene.attachments("part0")
+    assert [(a, b) for a, b, _ in scene.cracks()] == [("part0", "part1")]
+    welded = emu.io.load_scene(path, kinds=kinds, fibers={"part0": "laplace"}, weld=True)
+    emu.io.write(tmp_path / "whole.vtu", m.points, m.tets, cell_data={"part": part})
+    whole = emu.io.load_scene(tmp_path / "whole.vtu", kinds=kinds, fibers={"part0": "laplace"})
+    assert welded.cracks() == [] and len(welded.points) == len(m.points)
+    assert len(welded.attachments("part0")["part1"]) == len(whole.attachments("part0")["part1"])

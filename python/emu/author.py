@@ -76,7 +76,7 @@ class AuthoringError(ValueError):
 @dataclass
 class PartSpec:
     name: str
-    surface: str                       # absolute path
+    surface: object                    # absolute path, or the surface itself: (V (n, 3), F (f, 3))
     kind: str                          # muscle | tendon | bone
     fixed: bool = True                 # bones
     tendon_length: float | None = None   # muscles
@@ -388,29 +388,35 @@ def _muscle_fibers(points, tets, muscle: str, mtets: np.ndarray, ends: dict) -> 
     return laplace_fibers(points, sub, origin, insertion), note
 
 
-def author(parts_file, *, quiet: bool = True, threads: int = 0) -> AuthoredScene:
-    """Mesh the parts file's surfaces into one labelled tet mesh and build the
+def author(parts, *, quiet: bool = True, threads: int = 0) -> AuthoredScene:
+    """Mesh the parts' surfaces into one labelled tet mesh and build the
     Scene: parts with their kinds, attachments where muscles share vertices with
     bones, fibres, tendons, joints (declared, else detected). Raises
     AuthoringError naming the part and the fix for a part the mesher lost, a
     muscle attached to nothing, bones that touch, a surface that is not a
-    volume."""
+    volume.
+
+    parts  a parts file (path), or a PartsFile whose PartSpecs may hold their
+           surfaces as (V, F) arrays (emu.anatomy builds its scenes so)"""
     import time
 
     t0 = time.perf_counter()
-    spec = read_parts(parts_file)
+    spec = parts if isinstance(parts, PartsFile) else read_parts(parts)
     surfaces, volumes, defects = [], [], []
     for p in spec.parts:
-        V, F = read_surface(p.surface)
+        if isinstance(p.surface, (str, os.PathLike)):
+            V, F = read_surface(p.surface)
+        else:
+            V, F = (np.asarray(a) for a in p.surface)
         vol = surface_volume(V, F)
         d = surface_defects(F)
         if d["open_edges"] or d["nonmanifold_edges"]:
-            defects.append(f"part '{p.name}': the surface {os.path.basename(p.surface)} is not closed "
+            defects.append(f"part '{p.name}': its surface is not closed "
                            f"({d['open_edges']} open edge(s), {d['nonmanifold_edges']} non-manifold); meshed by "
                            "winding numbers, which close small holes: check the part's shape")
         diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         if not abs(vol) > 1e-9 * diag ** 3:
-            raise AuthoringError(f"part '{p.name}': the surface {p.surface} encloses no volume (a flat or open "
+            raise AuthoringError(f"part '{p.name}': its surface encloses no volume (a flat or open "
                                  "sheet?); give a closed surface")
         surfaces.append((V, F))
         volumes.append(abs(vol))

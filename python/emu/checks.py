@@ -17,9 +17,12 @@ from . import _core
 from .geometry import bbox_diagonal
 
 __all__ = ["MeshReport", "check_mesh", "tet_quality", "signed_volumes", "connected_components",
-           "check_anchored", "check_movable_bones", "integer_ids", "inverted_tets"]
+           "check_anchored", "check_movable_bones", "integer_ids", "inverted_tets", "coincident_vertices",
+           "weld_coincident"]
 
 SLIVER_QUALITY = 0.05
+# Vertices closer than this x the bounding-box diagonal are one point (coincident_vertices).
+COINCIDENT_TOL = 1e-9
 
 
 def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
@@ -53,6 +56,8 @@ class MeshReport:
     slivers: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))     # quality < 0.05
     min_quality: float = 1.0
     unused_vertices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    # (k, 2) pairs of used vertices at the same position that no tet joins (cracks)
+    coincident: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
 
     def lines(self) -> list[str]:
         out = [f"{self.num_vertices} vertices, {self.num_tets} tets, min quality {self.min_quality:.3g}"]
@@ -64,6 +69,12 @@ class MeshReport:
                        f"{self.slivers[:10].tolist()} (they solve, but stiffen the mesh locally)")
         if len(self.unused_vertices):
             out.append(f"{len(self.unused_vertices)} vertex/vertices belong to no tet and are ignored")
+        if len(self.coincident):
+            a, b = self.coincident[0]
+            out.append(f"{len(self.coincident)} pair(s) of vertices lie at the same point without being one vertex "
+                       f"(e.g. {a} and {b}): a crack, as between parts meshed separately; nothing holds them "
+                       "together. Weld them: load_scene(..., weld=True), --weld on the command line, or [mesh] "
+                       "weld = true in a scene file")
         return out
 
 
@@ -133,8 +144,43 @@ def check_mesh(points, tets):
     used = np.zeros(n, bool)
     used[tets.ravel()] = True
     report = MeshReport(num_vertices=n, num_tets=m, reoriented=neg, slivers=np.flatnonzero(q < SLIVER_QUALITY),
-                        min_quality=float(q.min()), unused_vertices=np.flatnonzero(~used))
+                        min_quality=float(q.min()), unused_vertices=np.flatnonzero(~used),
+                        coincident=coincident_vertices(points, tets))
     return points, tets, report
+
+
+def coincident_vertices(points: np.ndarray, tets: np.ndarray, tol: float = COINCIDENT_TOL) -> np.ndarray:
+    """(k, 2) pairs (a < b) of distinct vertices that tets use and that lie
+    within tol x the bounding-box diagonal of each other (positions snapped to
+    a grid of that spacing: exact duplicates, as separately meshed parts have
+    on their common surface, always pair)."""
+    used = np.unique(tets)
+    h = tol * bbox_diagonal(points)
+    key = np.round(points[used] / h).astype(np.int64) if h > 0 else points[used]
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    pairs = []
+    for g in np.flatnonzero(counts > 1):
+        ids = used[inverse == g]
+        pairs += [(ids[0], other) for other in ids[1:]]
+    return np.asarray(pairs, np.int64).reshape(-1, 2)
+
+
+def weld_coincident(points: np.ndarray, tets: np.ndarray, tol: float = COINCIDENT_TOL) -> tuple:
+    """Merge coincident vertices (coincident_vertices) into one and drop the
+    vertices no tet uses. Returns (points (n', 3), tets (m, 4), old_to_new (n,)
+    with -1 for dropped vertices). Vertex ids change: pin by name or after."""
+    points, tets = np.asarray(points, np.float64), np.asarray(tets, np.int64)
+    target = np.arange(len(points))
+    for a, b in coincident_vertices(points, tets, tol):
+        target[b] = target[a]
+    tets = target[tets]
+    keep = np.unique(tets)
+    old_to_new = np.full(len(points), -1, np.int64)
+    old_to_new[keep] = np.arange(len(keep))
+    merged = old_to_new[target]
+    merged[~np.isin(target, keep)] = -1
+    return points[keep], old_to_new[tets], merged
 
 
 def connected_components(num_vertices: int, tets: np.ndarray) -> np.ndarray:

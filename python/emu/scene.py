@@ -164,6 +164,27 @@ class Scene:
         """{bone name: tet ids} in the scene's order."""
         return {p.name: p.tets for p in self.parts.values() if p.kind == "bone"}
 
+    def cracks(self) -> list:
+        """[(part, other part, pairs)]: parts that touch at vertices lying at the
+        same point without being shared (mesh_report.coincident), so that nothing
+        holds them together there (a muscle meshed apart from its bone is not
+        attached). Weld the mesh (emu.checks.weld_coincident, load_scene(...,
+        weld=True)) to join them."""
+        pairs = self.mesh_report.coincident
+        if len(pairs) == 0 or not self.parts:
+            return []
+        names = list(self.parts)
+        owner = np.full(len(self.points), -1, np.int64)   # one part per vertex (the last listed)
+        for k, p in enumerate(self.parts.values()):
+            owner[self.tets[p.tets].ravel()] = k
+        a, b = owner[pairs[:, 0]], owner[pairs[:, 1]]
+        out = {}
+        for x, y in zip(a, b):
+            if x >= 0 and y >= 0:
+                key = (min(x, y), max(x, y))
+                out[key] = out.get(key, 0) + 1
+        return [(names[x], names[y], n) for (x, y), n in sorted(out.items())]
+
     def joints(self) -> list:
         """Joints (emu.joints.Joint) between bones: detected from vertices shared
         by two bones (one shared vertex is a ball joint at ``centre``, two or more

@@ -53,10 +53,12 @@ def _print_info(args):
         else:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                scene = load_scene(mesh_path(args.mesh), warn=False)
+                scene = load_scene(mesh_path(args.mesh), warn=False, **_parse_parts(args.kind, args.fibers, args.weld))
         print(scene)
         for line in scene.mesh_report.lines():
             print("  " + line)
+        for a, b, n in scene.cracks():
+            print(f"  crack: {a} and {b} touch at {n} vertex pair(s) they do not share (--weld joins them)")
         for p in scene.parts.values():
             print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}")
             if p.kind == "muscle":
@@ -159,6 +161,41 @@ def _parse_activation(items):
     return act
 
 
+def _parse_parts(kinds, fibers, weld=False) -> dict:
+    """load_scene's kinds= and fibers= from --kind NAME=KIND and --fibers
+    (file | laplace for every muscle, or NAME=file|laplace|x,y,z per muscle)."""
+    out = {}
+    if kinds:
+        out["kinds"] = {}
+        for it in kinds:
+            if "=" not in it:
+                raise SystemExit(f"--kind expects NAME=KIND (muscle, tendon or bone), got {it!r}")
+            k, v = it.split("=", 1)
+            out["kinds"][k] = v
+    per_part = {}
+    for it in fibers or []:
+        if "=" not in it:
+            if it not in ("file", "laplace"):
+                raise SystemExit(f"--fibers expects file, laplace or NAME=file|laplace|x,y,z, got {it!r}")
+            out["other_fibers"] = it
+            continue
+        k, v = it.split("=", 1)
+        if v in ("file", "laplace"):
+            per_part[k] = v
+        else:
+            try:
+                per_part[k] = [float(c) for c in v.split(",")]
+            except ValueError:
+                raise SystemExit(f"--fibers {k}: {v!r} is not file, laplace or a direction x,y,z") from None
+    if per_part:
+        out["fibers"] = per_part
+    elif "other_fibers" in out:
+        out["fibers"] = out.pop("other_fibers")
+    if weld:
+        out["weld"] = True
+    return out
+
+
 def mesh_path(arg: str) -> str:
     """A mesh file, or the converted file of a research scene named ``arg``
     (fetched on first use)."""
@@ -174,7 +211,8 @@ def _data(args):
 def _solve(args):
     if args.threads:
         set_threads(args.threads)
-    scene = load_scene(mesh_path(args.mesh), free_bones=args.free_bones or ())
+    scene = load_scene(mesh_path(args.mesh), free_bones=args.free_bones or (),
+                       **_parse_parts(args.kind, args.fibers, args.weld))
     print(scene)
     act = _parse_activation(args.activation)
     kw = dict(alpha=args.alpha, step=args.step) if args.method == "emu" else {}
@@ -233,6 +271,17 @@ def _mesh(args):
     return 0
 
 
+def _part_options(p):
+    """--kind and --fibers: what a labelled mesh's parts are (emu.io.load_scene)."""
+    p.add_argument("--kind", nargs="*", metavar="NAME=KIND",
+                   help="a part's kind: muscle, tendon or bone (default: the scene.json beside the mesh, else muscle)")
+    p.add_argument("--fibers", nargs="*", metavar="SPEC",
+                   help="muscles' fibres: file (the mesh's 'fiber' cell data) or laplace (between the two bone "
+                        "attachments) for every muscle, or NAME=file|laplace|x,y,z for one")
+    p.add_argument("--weld", action="store_true",
+                   help="merge vertices at the same point (parts meshed apart; vertex ids change)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="emu", description="EMU muscle simulation (and its FEM reference)")
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -259,6 +308,7 @@ def main(argv=None):
     s = sub.add_parser("solve", help="solve a labelled mesh at one activation (bones fixed unless --free-bones)")
     s.add_argument("mesh", help="a labelled mesh file, or a research scene name (" + ", ".join(datasets.names()) + ")")
     s.add_argument("--free-bones", nargs="*", metavar="BONE", help="bones the muscles move")
+    _part_options(s)
     s.add_argument("--activation", nargs="*", help="NAME=VALUE absolute activations")
     s.add_argument("--method", choices=["emu", "fem"], default="emu")
     s.add_argument("--step", choices=["newton-krylov", "woodbury", "lbfgs"], default="newton-krylov")
@@ -299,6 +349,7 @@ def main(argv=None):
     i = sub.add_parser("info", help="BLAS, threads; with a mesh or scene file: parts, attachments, defects, "
                                     "memory estimate")
     i.add_argument("mesh", nargs="?", help="a labelled mesh (.vtu, ...) or a scene file (.toml, .json)")
+    _part_options(i)
     i.set_defaults(func=_print_info)
     g = sub.add_parser("data", help="download and convert the authors' research scenes ahead of use "
                                     "(default: all); EMU_DATA_DIR: a local copy instead of the network")

@@ -10,6 +10,7 @@
     dataset = "big_muscle"       # or one of the authors' research scenes (simple_joint, big_muscle,
                                  # realistic_biceps), downloaded on first use (emu.datasets, `emu data`)
     fibers = "file"              # muscles' fibres: "file" (cell data) or "laplace" (between attachments)
+    weld = false                 # merge vertices at the same point (parts meshed apart; ids change)
     [mesh.arm]                   # the procedural arm of `emu demo`: bones "humerus" (fixed) and
     resolution = 2               # "forearm" (moved by the muscles) on a hinge, muscles "flexor"
                                  # and "extensor" (Laplace fibres)
@@ -23,6 +24,11 @@
     radius = 1.5
     end_radius = 0.5
     tendon_fraction = 0.12
+
+    [parts.belly]                # mesh.path / mesh.dataset: what a labelled part is
+    kind = "muscle"              # muscle | tendon | bone (default: the scene.json beside the mesh, else
+                                 # muscle); gmsh physical names and `emu mesh` name the parts
+    fibers = "laplace"           # muscles: "file", "laplace" or a direction [x, y, z] (others: mesh.fibers)
 
     [materials.belly]            # per-part overrides (any of the keys)
     youngs = 6e4
@@ -109,11 +115,12 @@ class SceneFileError(ValueError):
 
 
 _SCHEMA = {
-    "mesh": {"path": str, "dataset": str, "fibers": str, "fusiform": {"tets": int, "resolution": int, "length": float,
+    "mesh": {"path": str, "dataset": str, "fibers": str, "weld": bool, "fusiform": {"tets": int, "resolution": int, "length": float,
                                                      "radius": float, "end_radius": float,
                                                      "tendon_fraction": float},
              "arm": {"resolution": int}, "neck": {"resolution": int}, "elbow_wrap": {"resolution": int}},
     "materials": "table of tables",
+    "parts": "table of tables",
     "pins": list,
     "gravity": list,
     "solver": {"method": str, "alpha": float, "modes": int, "step": str, "rtol_grad": float,
@@ -133,6 +140,7 @@ _SCHEMA = {
 _BONE_KEYS = {"fixed": bool, "acap_weight": float, "joint_stiffness": float, "axis": list, "centre": list,
               "angle": list, "interpolation": str}
 _JOINT_KEYS = {"bones": list, "centre": list, "axis": list}
+_PART_KEYS = {"kind": str, "fibers": (str, list)}
 _MATERIAL_KEYS = {"youngs": float, "poisson": float, "density": float, "max_activation": float,
                   "acap_weight": float}
 _CURVE_KEYS = {"keys": list, "per_frame": list, "interpolation": str, "normalized": bool}
@@ -191,7 +199,8 @@ def _check_table(table, schema, where):
             if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
                 raise SceneFileError(f"'{name}' must be a table of tables ([{name}.<part name>])")
         elif not _type_ok(value, kind):
-            raise SceneFileError(f"'{name}' must be {kind.__name__}, got {type(value).__name__} ({value!r})")
+            want = " or ".join(k.__name__ for k in kind) if isinstance(kind, tuple) else kind.__name__
+            raise SceneFileError(f"'{name}' must be {want}, got {type(value).__name__} ({value!r})")
 
 
 def _read(path: str) -> dict:
@@ -226,8 +235,9 @@ def load_scene_file(path) -> SceneSpec:
     if sum(k in mesh for k in ("path", "dataset", "fusiform", "arm", "neck", "elbow_wrap")) != 1:
         raise SceneFileError("[mesh] needs exactly one of 'path', 'dataset', [mesh.fusiform], [mesh.arm], "
                              "[mesh.neck] or [mesh.elbow_wrap]")
-    if "fibers" in mesh and not ("path" in mesh or "dataset" in mesh):
-        raise SceneFileError("mesh.fibers applies to mesh.path or mesh.dataset only")
+    for key in ("fibers", "weld"):
+        if key in mesh and not ("path" in mesh or "dataset" in mesh):
+            raise SceneFileError(f"mesh.{key} applies to mesh.path or mesh.dataset only")
     if "path" in mesh or "dataset" in mesh:
         if "path" in mesh:
             mpath = mesh["path"] if os.path.isabs(mesh["path"]) else os.path.join(base, mesh["path"])
@@ -241,7 +251,20 @@ def load_scene_file(path) -> SceneSpec:
         fib = mesh.get("fibers", "file")
         if fib not in ("file", "laplace"):
             raise SceneFileError(f"mesh.fibers must be 'file' or 'laplace', got {fib!r}")
-        scene = load_scene(mpath, fibers=fib)
+        kinds, per_part = {}, {}
+        for name, table in data.get("parts", {}).items():
+            _check_table(table, _PART_KEYS, f"parts.{name}")
+            if "kind" in table:
+                kinds[name] = table["kind"]
+            if "fibers" in table:
+                per_part[name] = table["fibers"]
+        try:   # mesh.fibers for the muscles [parts] does not name
+            scene = load_scene(mpath, fibers=per_part or fib, kinds=kinds, weld=mesh.get("weld", False),
+                               other_fibers=mesh.get("fibers") if per_part else None)
+        except ValueError as e:
+            raise SceneFileError(f"mesh.path {mesh.get('path') or mesh.get('dataset')}: {e}") from None
+    elif "parts" in data:
+        raise SceneFileError("[parts.<name>] (kind, fibers) applies to mesh.path or mesh.dataset only")
     elif "arm" in mesh or "neck" in mesh or "elbow_wrap" in mesh:
         kind = next(k for k in ("arm", "neck", "elbow_wrap") if k in mesh)
         res = int(mesh[kind].get("resolution", 2))

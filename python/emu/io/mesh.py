@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..checks import weld_coincident
+from ..fibers import attachment_fibers
 from ..scene import MeshWarning, Scene
 
 __all__ = ["TetMesh", "read", "write", "load_scene"]
@@ -98,52 +100,118 @@ def write(path, points, tets, *, cell_data: dict | None = None, point_data: dict
 
 
 def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_bones=(), warn=True,
-               fibers="file"):
-    """A Scene from a labelled tet mesh (the shared scenes, or any mesh with a
-    ``part`` label and ``fiber`` cell data): parts of kind ``muscle`` become
-    muscles with the file's fibres (fibers="file") or a Laplace field between
-    their two bone attachments (fibers="laplace"), ``tendon`` tendons, ``bone``
-    bones: fixed, except those named in free_bones, which the muscles move."""
-    if fibers not in ("file", "laplace"):
-        raise ValueError(f"fibers must be 'file' or 'laplace', got {fibers!r}")
+               fibers="file", kinds=None, other_fibers=None, weld=False):
+    """A Scene from a labelled tet mesh (the shared scenes, `emu mesh`'s output,
+    or any mesh with part labels: cell data ``part``, ``gmsh:physical`` or
+    ``medit:ref``).
+
+    kinds   {part name: "muscle" | "tendon" | "bone"}: overrides the kinds of a
+            ``scene.json`` beside the mesh; a part named in neither is a muscle
+    fibers  the muscles' fibres: "file" (``fiber`` cell data), "laplace" (a
+            Laplace field between the muscle's two bone attachments), or a dict
+            {muscle name: "file" | "laplace" | (3,) direction}, the muscles it
+            does not name taking other_fibers ("file" or "laplace"; None:
+            "file" where the mesh has fibres, else "laplace")
+    weld    merge vertices that lie at the same point (a mesh whose parts were
+            meshed apart: emu.checks.weld_coincident; vertex ids change); without
+            it such cracks between parts are reported with a MeshWarning
+    Bones are fixed, except those named in free_bones, which the muscles move."""
     mesh = read(path)
     part = mesh.part
     if part is None:
         raise ValueError(f"{path} has no part labels (cell data 'part', 'gmsh:physical' or 'medit:ref')")
     fib = mesh.fiber
     part, fib = label_unlabelled_tets(mesh.tets, part, fib, path=path, warn=warn)
+    names = {int(p): mesh.part_names.get(int(p), f"part{p}") for p in np.unique(part)}
+    kind_of = {n: mesh.part_kinds.get(pid, "muscle") for pid, n in names.items()}
+    for name, kind in (kinds or {}).items():
+        if name not in kind_of:
+            raise ValueError(f"{path} has no part named '{name}' (parts: {', '.join(kind_of)})")
+        if kind not in ("muscle", "tendon", "bone"):
+            raise ValueError(f"part '{name}': kind must be muscle, tendon or bone, got {kind!r}")
+        kind_of[name] = kind
+    fiber_of = _fiber_choices(path, fibers, kind_of, fib is not None, other_fibers)
+    points, tets = mesh.points, mesh.tets
+    if weld:
+        points, tets, _ = weld_coincident(points, tets)
     with warnings.catch_warnings():
         if not warn:
             warnings.simplefilter("ignore")
-        scene = Scene(mesh.points, mesh.tets, warn=warn)
+        scene = Scene(points, tets, warn=warn)
     free_bones = [free_bones] if isinstance(free_bones, str) else list(free_bones)
-    bone_names = [mesh.part_names.get(int(p), f"part{p}") for p in np.unique(part)
-                  if mesh.part_kinds.get(int(p), "muscle") == "bone"]
+    bone_names = [n for n, k in kind_of.items() if k == "bone"]
     unknown = sorted(set(free_bones) - set(bone_names))
     if unknown:
         raise ValueError(f"free_bones: {path} has no bone named {', '.join(map(repr, unknown))} "
                          f"(bones: {', '.join(bone_names) or 'none'})")
-    for pid in np.unique(part):
-        name = mesh.part_names.get(int(pid), f"part{pid}")
-        kind = mesh.part_kinds.get(int(pid), "muscle")
+    for pid, name in names.items():
+        kind = kind_of[name]
         idx = np.flatnonzero(part == pid)
         if kind == "muscle":
-            if fibers == "laplace":
+            how = fiber_of[name]
+            if isinstance(how, str) and how == "laplace":
                 scene.add_muscle(name, idx, None, youngs=muscle_youngs, poisson=poisson)
-                continue
-            if fib is None:
-                raise ValueError(f"{path}: muscle part '{name}' needs 'fiber' cell data (or load with "
-                                 "fibers='laplace')")
-            scene.add_muscle(name, idx, fib[idx], youngs=muscle_youngs, poisson=poisson)
+            elif isinstance(how, str):
+                scene.add_muscle(name, idx, fib[idx], youngs=muscle_youngs, poisson=poisson)
+            else:
+                scene.add_muscle(name, idx, how, youngs=muscle_youngs, poisson=poisson)
         elif kind == "tendon":
             scene.add_tendon(name, idx, poisson=poisson)
         elif kind == "bone":
             scene.add_bone(name, idx, youngs=bone_youngs, poisson=poisson, fixed=name not in free_bones)
         else:
             raise ValueError(f"{path}: part '{name}' has unknown kind '{kind}' (muscle, tendon or bone)")
-    if fibers == "laplace":
-        scene.resolve_fibers()
+    for name, how in fiber_of.items():
+        if isinstance(how, str) and how == "laplace":
+            try:
+                scene.parts[name].fibers = attachment_fibers(scene.points, scene.tets, name, scene.parts[name].tets,
+                                                             scene.attachments(name))
+            except ValueError as e:
+                raise ValueError(f"{e}. {FIBER_FIX.format(name=name)}") from None
+    if warn:
+        for a, b, n in scene.cracks():
+            warnings.warn(f"{path}: {scene.parts[a].kind} '{a}' and {scene.parts[b].kind} '{b}' touch at {n} "
+                          "vertex pair(s) they do not share: nothing joins them there (a muscle is not attached "
+                          "there); load with weld=True (--weld, [mesh] weld = true) to join them",
+                          MeshWarning, stacklevel=2)
     return scene
+
+
+# What to do when a muscle has no fibres, for each front door.
+FIBER_FIX = ("Give muscle '{name}' fibres: a direction or the file's (scene file: [parts.{name}] fibers = "
+             "[x, y, z] or \"file\"; command line: --fibers {name}=x,y,z; Python: load_scene(..., "
+             "fibers={{'{name}': (x, y, z)}})")
+
+
+def _fiber_choices(path, fibers, kind_of: dict, has_file: bool, other) -> dict:
+    """{muscle name: "file" | "laplace" | (3,) direction} from load_scene's fibers argument."""
+    muscles = [n for n, k in kind_of.items() if k == "muscle"]
+    if isinstance(fibers, str):
+        if fibers not in ("file", "laplace"):
+            raise ValueError(f"fibers must be 'file', 'laplace' or a {{muscle: choice}} dict, got {fibers!r}")
+        out = {m: fibers for m in muscles}
+    else:
+        for name in fibers:
+            if name not in muscles:
+                raise ValueError(f"fibers: '{name}' is not a muscle of {path} (muscles: {', '.join(muscles) or 'none'})")
+        other = other or ("file" if has_file else "laplace")
+        out = {m: fibers.get(m, other) for m in muscles}
+    for m, how in out.items():
+        if isinstance(how, str):
+            if how not in ("file", "laplace"):
+                raise ValueError(f"fibers of '{m}' must be 'file', 'laplace' or a direction [x, y, z], got {how!r}")
+            if how == "file" and not has_file:
+                raise ValueError(f"{path}: muscle part '{m}' needs fibres and the mesh has no 'fiber' cell data: "
+                                 "use the Laplace field between its two bone attachments (scene file: [parts."
+                                 f"{m}] fibers = \"laplace\"; command line: --fibers {m}=laplace; Python: "
+                                 f"load_scene(..., fibers={{'{m}': 'laplace'}})) or a direction")
+        else:
+            d = np.asarray(how, dtype=np.float64)
+            if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+                raise ValueError(f"fibers of '{m}' must be 'file', 'laplace' or a nonzero direction [x, y, z], "
+                                 f"got {how!r}")
+            out[m] = d
+    return out
 
 
 def label_unlabelled_tets(tets, part, fiber=None, *, path="the mesh", warn=True):

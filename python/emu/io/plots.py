@@ -37,6 +37,20 @@ def _face_colours(scene, faces_tet, activation_of_tet):
     return col
 
 
+def _shade(e1, e2, view, depth_axis) -> np.ndarray:
+    """Lambert shading of faces (edges e1, e2: (f, 3)) lit from over the
+    viewer's upper left, so the surfaces read as 3D: 0.35 (facing away from the
+    light) to 1 (facing it)."""
+    n = np.cross(e1, e2)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    light = np.zeros(3)
+    light[depth_axis] = 1.0 if view == (0, 1) else -1.0   # toward the viewer (the faces kept face it)
+    light[view[1]] += 0.6    # from above
+    light[view[0]] -= 0.4    # and the left
+    light /= np.linalg.norm(light)
+    return 0.35 + 0.65 * np.clip(n @ light, 0.0, 1.0)
+
+
 def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0, 1), columns=4):
     """Draw solved frames side by side, looking along the axis not in ``view``.
 
@@ -74,8 +88,8 @@ def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0
         keep = np.flatnonzero(nrm > 0)
         order = keep[np.argsort(tri[keep, :, depth_axis].mean(axis=1))]
         poly = tri[order][:, :, list(view)]
-        col = _face_colours(scene, faces_tet[order], act_tet)
-        ax.add_collection(PolyCollection(poly, facecolors=col, edgecolors=(0, 0, 0, 0.15), linewidths=0.2))
+        col = _face_colours(scene, faces_tet[order], act_tet) * _shade(e1[order], e2[order], view, depth_axis)[:, None]
+        ax.add_collection(PolyCollection(poly, facecolors=col, edgecolors=(0, 0, 0, 0.06), linewidths=0.2))
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_aspect("equal")
