@@ -290,10 +290,13 @@ def _mesher():
     return PyfTetWildWrapper
 
 
-def tetrahedralize(surfaces: list, edge_length: float, *, quiet: bool = True, threads: int = 0) -> tuple:
+def tetrahedralize(surfaces: list, edge_length: float, *, quiet: bool = True, threads: int = 0,
+                   epsilon: float = 1e-3) -> tuple:
     """ONE conforming tet mesh of the union of the closed surfaces [(V, F), ...],
     each tet labelled with the index of the last surface in the list that holds
-    it (fTetWild's CSG union by winding numbers).
+    it (fTetWild's CSG union by winding numbers). epsilon: how far the mesh's
+    boundary may stray from the surfaces, relative to their bounding-box
+    diagonal (fTetWild's envelope; a tighter one refines near the surfaces).
 
     Returns points (n, 3), tets (m, 4) positively oriented, label (m,) in
     [0, len(surfaces)). Only the vertices the tets use are kept."""
@@ -318,7 +321,7 @@ def tetrahedralize(surfaces: list, edge_length: float, *, quiet: bool = True, th
         with open(csg, "w") as out:
             json.dump(tree, out)
         with _quiet_stdout() if quiet else contextlib.nullcontext():
-            v, c, marker = W.tetrahedralize_csg(csg, 1e-3, edge_length / diag, 10.0, True, int(threads), 6, False)
+            v, c, marker = W.tetrahedralize_csg(csg, epsilon, edge_length / diag, 10.0, True, int(threads), 6, False)
     v, c, marker = np.asarray(v, np.float64), np.asarray(c, np.int64), np.asarray(marker, np.int64).ravel()
     if len(c) == 0:
         raise AuthoringError("the mesher returned no tets (are the surfaces closed and of a sensible size?)")
@@ -385,10 +388,10 @@ def _muscle_fibers(points, tets, muscle: str, mtets: np.ndarray, ends: dict) -> 
         note = f"Laplace field from '{a}' to the muscle's far end"
     if len(insertion) == 0:
         raise AuthoringError(f"muscle '{muscle}': its ends coincide; give it fibers = [x, y, z]")
-    return laplace_fibers(points, sub, origin, insertion), note
+    return laplace_fibers(points, sub, origin, insertion, fill_flat=True), note
 
 
-def author(parts, *, quiet: bool = True, threads: int = 0) -> AuthoredScene:
+def author(parts, *, quiet: bool = True, threads: int = 0, epsilon: float = 1e-3) -> AuthoredScene:
     """Mesh the parts' surfaces into one labelled tet mesh and build the
     Scene: parts with their kinds, attachments where muscles share vertices with
     bones, fibres, tendons, joints (declared, else detected). Raises
@@ -396,8 +399,9 @@ def author(parts, *, quiet: bool = True, threads: int = 0) -> AuthoredScene:
     muscle attached to nothing, bones that touch, a surface that is not a
     volume.
 
-    parts  a parts file (path), or a PartsFile whose PartSpecs may hold their
-           surfaces as (V, F) arrays (emu.anatomy builds its scenes so)"""
+    parts    a parts file (path), or a PartsFile whose PartSpecs may hold their
+             surfaces as (V, F) arrays (emu.anatomy builds its scenes so)
+    epsilon  the mesher's envelope (tetrahedralize)"""
     import time
 
     t0 = time.perf_counter()
@@ -422,7 +426,8 @@ def author(parts, *, quiet: bool = True, threads: int = 0) -> AuthoredScene:
         volumes.append(abs(vol))
     edge = spec.edge_length or (sum(volumes) / (TETS_PER_EDGE_CUBE * (spec.tets or 10000))) ** (1 / 3)
     order = sorted(range(len(spec.parts)), key=lambda i: _MESH_ORDER[spec.parts[i].kind])
-    points, tets, label = tetrahedralize([surfaces[i] for i in order], edge, quiet=quiet, threads=threads)
+    points, tets, label = tetrahedralize([surfaces[i] for i in order], edge, quiet=quiet, threads=threads,
+                                         epsilon=epsilon)
     part = np.asarray(order)[label]
     mesh_s = time.perf_counter() - t0
     for i, p in enumerate(spec.parts):

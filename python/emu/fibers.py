@@ -14,9 +14,13 @@ from . import _core
 __all__ = ["laplace_fibers", "attachments", "attachment_fibers", "fiber_angle_degrees"]
 
 
-def laplace_fibers(points, tets, origin, insertion) -> np.ndarray:
+def laplace_fibers(points, tets, origin, insertion, *, fill_flat: bool = False) -> np.ndarray:
     """points  (n, 3); tets  (k, 4) the muscle's tets; origin, insertion  vertex ids.
-    Returns (k, 3) unit fibre directions pointing from origin to insertion."""
+    Returns (k, 3) unit fibre directions pointing from origin to insertion.
+
+    A tet whose four vertices are all fixed to one value (a muscle tet lying
+    in its attachment) has no direction: an error, or with fill_flat the mean
+    direction of the tets sharing its vertices."""
     points = np.asarray(points, dtype=np.float64)
     tets = np.asarray(tets, dtype=np.int64)
     origin = np.unique(np.asarray(origin, dtype=np.int64).ravel())
@@ -35,10 +39,22 @@ def laplace_fibers(points, tets, origin, insertion) -> np.ndarray:
     phi = _core.harmonic_field(points, tets.astype(np.int32), fixed.astype(np.int32), values)
     g = np.asarray(_core.tet_gradients(points, tets.astype(np.int32), phi))
     norm = np.linalg.norm(g, axis=1)
-    if np.any(norm <= 1e-12 * norm.max()):
-        raise ValueError(f"{np.sum(norm <= 1e-12 * norm.max())} tet(s) have no fibre direction (the field is "
+    flat = norm <= 1e-12 * norm.max()
+    if np.any(flat) and not fill_flat:
+        raise ValueError(f"{np.sum(flat)} tet(s) have no fibre direction (the field is "
                          "flat there: all four vertices fixed to the same value?)")
-    return g / norm[:, None]
+    g = g / np.where(flat, 1.0, norm)[:, None]
+    while np.any(flat):   # flat tets take their neighbours' mean direction, front by front
+        per_vertex = np.zeros((len(points), 3))
+        np.add.at(per_vertex, tets[~flat].ravel(), np.repeat(g[~flat], 4, axis=0))
+        mean = per_vertex[tets[flat]].sum(axis=1)
+        ok = np.linalg.norm(mean, axis=1) > 0
+        if not ok.any():
+            raise ValueError(f"{np.sum(flat)} tet(s) have no fibre direction and no neighbour with one")
+        idx = np.flatnonzero(flat)[ok]
+        g[idx] = mean[ok] / np.linalg.norm(mean[ok], axis=1)[:, None]
+        flat[idx] = False
+    return g
 
 
 def attachments(tets: np.ndarray, muscle_tets: np.ndarray, bones: dict) -> dict:
