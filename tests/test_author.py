@@ -11,7 +11,7 @@ import emu
 from emu.author import AuthoringError, author, read_parts, surface_defects, surface_volume, winding_numbers
 from emu.shapes import capsule, spindle
 
-import pytetwild  # noqa: F401  (emu[mesh], part of the test extra: a missing mesher fails here, never skips)
+import pytetwild  # noqa: F401  (a dependency: a missing mesher fails here, never skips)
 
 HUMERUS = dict(p0=[0, 0, 0], p1=[0, 0, 4], r=0.35)
 FOREARM = dict(p0=[0, 0, 4.5], p1=[0, 0, 8.5], r=0.3)

@@ -2,8 +2,7 @@
 reads) meshed into ONE conforming, labelled tet mesh, a Scene and a scene
 file (`emu mesh PARTS.toml --out DIR`).
 
-The mesher is fTetWild through pytetwild's CSG entry (the optional extra
-``emu[mesh]``): the union of all surfaces, every tet labelled with the input
+The mesher is fTetWild through pytetwild's CSG entry (a dependency): the union of all surfaces, every tet labelled with the input
 surface that holds it by fTetWild's winding-number test, so surfaces with
 small holes or overlaps still mesh. Overlap rule: where surfaces overlap the
 part listed later in the mesher's order wins, and that order is muscles,
@@ -285,8 +284,8 @@ def _mesher():
     try:
         from pytetwild import PyfTetWildWrapper
     except ImportError as e:
-        raise ImportError("emu mesh needs the mesher fTetWild: pip install 'emu[mesh]' (pytetwild) "
-                          f"[{e}]") from None
+        raise ImportError("emu's mesher is fTetWild, from the package pytetwild (an emu dependency): "
+                          f"pip install 'pytetwild>=0.2.3,<0.4' [{e}]") from None
     return PyfTetWildWrapper
 
 

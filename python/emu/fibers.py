@@ -80,7 +80,8 @@ def attachment_fibers(points, tets, muscle: str, muscle_tets, atts: dict) -> np.
                          "fibres from attachments need exactly two: pass fibers=, or origin= and "
                          "insertion= vertex ids")
     (_, origin), (_, insertion) = atts.items()
-    return laplace_fibers(points, np.asarray(tets)[muscle_tets], origin, insertion)
+    # a muscle tet lying in an attachment (all four vertices on the bone) takes its neighbours' direction
+    return laplace_fibers(points, np.asarray(tets)[muscle_tets], origin, insertion, fill_flat=True)
 
 
 def fiber_angle_degrees(a: np.ndarray, b: np.ndarray) -> np.ndarray:

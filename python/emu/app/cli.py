@@ -339,7 +339,7 @@ def main(argv=None):
                                                              "file's, 1)")
     w.set_defaults(func=_sweep)
     m = sub.add_parser("mesh", help="mesh one closed surface per part (a parts file, TOML) into one labelled "
-                                    "tet mesh and a scene file (needs emu[mesh]: fTetWild)")
+                                    "tet mesh and a scene file (fTetWild)")
     m.add_argument("parts", help="the parts file: [mesh] tets or edge_length, [[part]] name/surface/kind, "
                                  "optional [[joint]] (emu.author)")
     m.add_argument("--out", required=True, help="output folder: mesh.vtu, scene.json, scene.toml, report.json")

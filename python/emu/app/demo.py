@@ -1,7 +1,8 @@
 """``emu demo``: the built-in arm, flexing then extending the elbow.
 
-The procedural arm (emu.scenes.arm): the humerus fixed, the forearm on a
-hinge moved by a flexor, which fires first, then an extensor. Each frame is
+The built-in arm from smooth shapes (emu.anatomy.arm, meshed on first use and
+cached): the humerus fixed, the forearm on a hinge moved by a flexor, which
+fires first, then an extensor. Each frame is
 solved by EMU (warm-started from the last) and, for an honest comparison, by
 FEM; the outputs are those of ``emu run`` plus a PNG contact sheet and a plot
 of joint angle and activation over time, and summary.json with EMU's error
@@ -18,7 +19,7 @@ from ..activation import Curve
 from ..bones import bone_angle
 from ..geometry import vertex_error
 from ..io.plots import angle_activation_plot, contact_sheet
-from ..scenes import arm
+from ..anatomy import arm
 from ..solve import Solver
 from .run import run_scene
 from .scenefile import SceneSpec
@@ -26,11 +27,12 @@ from .scenefile import SceneSpec
 __all__ = ["demo_spec", "run_demo"]
 
 
-def demo_spec(resolution: int = 3, frames: int = 25, alpha: float | None = None, accuracy: float | None = None):
+def demo_spec(resolution: int = 3, frames: int = 25, alpha: float | None = None, accuracy: float | None = None,
+              progress=None):
     """The demo scene as a SceneSpec: 2 s, flexor up to 0.45 and back in the
     first second, extensor up to 1.0 and back in the second. EMU's default:
     accuracy 0.01 (alpha chosen for it) unless alpha is given."""
-    scene = arm(resolution)
+    scene = arm(resolution, progress=progress)
     dt = 2.0 / (frames - 1)
     curves = {"flexor": Curve(keys=[[0.0, 0.0], [0.5, 0.45], [1.0, 0.0]], interpolation="smooth"),
               "extensor": Curve(keys=[[0.0, 0.0], [1.0, 0.0], [1.5, 1.0], [2.0, 0.0]], interpolation="smooth")}
@@ -40,16 +42,16 @@ def demo_spec(resolution: int = 3, frames: int = 25, alpha: float | None = None,
     if accuracy is not None:
         solver["accuracy"] = accuracy
     return SceneSpec(scene=scene, solver=solver, frames=frames, dt=dt,
-                     curves=curves, source="built-in arm (emu.scenes.arm)")
+                     curves=curves, source="built-in arm (emu.anatomy.arm)")
 
 
 def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float | None = None, compare_fem: bool = True,
              progress=print, accuracy: float | None = None) -> dict:
     """Run the demo into ``out`` (see the module docstring); returns summary.json's contents."""
-    spec = demo_spec(resolution, frames, alpha, accuracy)
+    spec = demo_spec(resolution, frames, alpha, accuracy, progress=lambda m: progress(f"emu demo: {m}"))
     scene = spec.scene
     os.makedirs(out, exist_ok=True)
-    progress(f"emu demo: procedural arm, {len(scene.tets)} tets, {len(scene.points)} vertices; humerus fixed, "
+    progress(f"emu demo: the built-in arm, {len(scene.tets)} tets, {len(scene.points)} vertices; humerus fixed, "
              "forearm on a hinge; the flexor fires, then the extensor")
     kept = {}
     log = run_scene(spec, out, progress=progress, on_frame=lambda k, sol: kept.__setitem__(k, sol.positions))

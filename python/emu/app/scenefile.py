@@ -5,19 +5,22 @@
     gravity = [0.0, 0.0, 0.0]
 
     [mesh]                       # exactly one of: path | dataset | [mesh.fusiform] | [mesh.arm] | [mesh.neck]
-                                 # | [mesh.elbow_wrap]
+                                 # | [mesh.leg] | [mesh.elbow_wrap]
     path = "muscle.vtu"          # a labelled mesh file, relative to the scene file
     dataset = "big_muscle"       # or one of the authors' research scenes (simple_joint, big_muscle,
                                  # realistic_biceps), downloaded on first use (emu.datasets, `emu data`)
     fibers = "file"              # muscles' fibres: "file" (cell data) or "laplace" (between attachments)
     weld = false                 # merge vertices at the same point (parts meshed apart; ids change)
-    [mesh.arm]                   # the procedural arm of `emu demo`: bones "humerus" (fixed) and
+    [mesh.arm]                   # the built-in arm of `emu demo` (emu.anatomy, smooth shapes meshed once and
+                                 # cached): bones "humerus" (fixed) and
     resolution = 2               # "forearm" (moved by the muscles) on a hinge, muscles "flexor"
                                  # and "extensor" (Laplace fibres)
     [mesh.elbow_wrap]            # the arm's bones and flexor, and an extensor one block clear of the
     resolution = 2               # bones behind the elbow (emu.scenes.elbow_wrap): for contact
     [mesh.neck]                  # a head on a ball joint: bones "torso" (fixed) and "head" (moved),
     resolution = 2               # muscles "left_back", "right_back", "left_front", "right_front"
+    [mesh.leg]                   # femur (fixed) and tibia (moved) on the knee hinge, bent 15 degrees;
+    resolution = 2               # muscles "hamstring" (flexes the knee) and "quadriceps"
     [mesh.fusiform]              # the procedural muscle (emu.scenes.fusiform): parts "belly"
     tets = 5000                  # and "tendons", pin sets "proximal" and "distal"
     length = 10.0
@@ -105,7 +108,8 @@ from .. import datasets
 from ..io.mesh import load_scene
 from ..parts import lame
 from ..poses import pose_about
-from ..scenes import arm, elbow_wrap, fusiform, neck
+from .. import anatomy
+from ..scenes import elbow_wrap, fusiform
 
 __all__ = ["SceneSpec", "load_scene_file", "SceneFileError"]
 
@@ -118,7 +122,8 @@ _SCHEMA = {
     "mesh": {"path": str, "dataset": str, "fibers": str, "weld": bool, "fusiform": {"tets": int, "resolution": int, "length": float,
                                                      "radius": float, "end_radius": float,
                                                      "tendon_fraction": float},
-             "arm": {"resolution": int}, "neck": {"resolution": int}, "elbow_wrap": {"resolution": int}},
+             "arm": {"resolution": int}, "neck": {"resolution": int}, "leg": {"resolution": int},
+             "elbow_wrap": {"resolution": int}},
     "materials": "table of tables",
     "parts": "table of tables",
     "pins": list,
@@ -232,9 +237,9 @@ def load_scene_file(path) -> SceneSpec:
     mesh = data.get("mesh")
     if mesh is None:
         raise SceneFileError("missing [mesh] table (mesh.path, mesh.dataset or [mesh.fusiform])")
-    if sum(k in mesh for k in ("path", "dataset", "fusiform", "arm", "neck", "elbow_wrap")) != 1:
+    if sum(k in mesh for k in ("path", "dataset", "fusiform", "arm", "neck", "leg", "elbow_wrap")) != 1:
         raise SceneFileError("[mesh] needs exactly one of 'path', 'dataset', [mesh.fusiform], [mesh.arm], "
-                             "[mesh.neck] or [mesh.elbow_wrap]")
+                             "[mesh.neck], [mesh.leg] or [mesh.elbow_wrap]")
     for key in ("fibers", "weld"):
         if key in mesh and not ("path" in mesh or "dataset" in mesh):
             raise SceneFileError(f"mesh.{key} applies to mesh.path or mesh.dataset only")
@@ -265,12 +270,12 @@ def load_scene_file(path) -> SceneSpec:
             raise SceneFileError(f"mesh.path {mesh.get('path') or mesh.get('dataset')}: {e}") from None
     elif "parts" in data:
         raise SceneFileError("[parts.<name>] (kind, fibers) applies to mesh.path or mesh.dataset only")
-    elif "arm" in mesh or "neck" in mesh or "elbow_wrap" in mesh:
-        kind = next(k for k in ("arm", "neck", "elbow_wrap") if k in mesh)
+    elif "arm" in mesh or "neck" in mesh or "leg" in mesh or "elbow_wrap" in mesh:
+        kind = next(k for k in ("arm", "neck", "leg", "elbow_wrap") if k in mesh)
         res = int(mesh[kind].get("resolution", 2))
         if res < 1:
             raise SceneFileError(f"mesh.{kind}.resolution must be >= 1, got {res}")
-        scene = {"arm": arm, "neck": neck, "elbow_wrap": elbow_wrap}[kind](res)
+        scene = {"arm": anatomy.arm, "neck": anatomy.neck, "leg": anatomy.leg, "elbow_wrap": elbow_wrap}[kind](res)
     else:
         scene = fusiform(**mesh["fusiform"], pins=())
     named_pins = scene.vertex_sets
