@@ -265,3 +265,37 @@ def test_example_pipeline_surfaces_to_picture(tmp_path):
     spec.loader.exec_module(picture)
     png = picture.main(str(out / "scene.toml"), str(run))
     assert os.path.getsize(png) > 10_000
+
+
+def test_overlapping_muscles_are_reported(tmp_path):
+    body = SMALL + '''[[part]]
+name = "brachialis"
+surface = "brachialis.obj"
+kind = "muscle"
+'''
+    path = _parts_file(str(tmp_path), body, {"humerus": _cap(HUMERUS["p0"], HUMERUS["p1"], HUMERUS["r"]),
+                                             "forearm": _cap(FOREARM["p0"], FOREARM["p1"], FOREARM["r"]),
+                                             "biceps": _spin(BICEPS["p0"], BICEPS["p1"], BICEPS["r"]),
+                                             "brachialis": _spin([0.55, 0, 1.5], [0.35, 0, 5.0], 0.45)})
+    a = author(path)
+    assert any("'biceps' and 'brachialis' overlap" in d for d in a.report["defects"]), a.report["defects"]
+
+
+def test_self_intersections_found_and_reported(tmp_path):
+    from emu.author import self_intersections
+
+    for V, F in (capsule([0, 0, 0], [0, 0, 3], 0.5), spindle([0, 0, 0], [1, 2, 3], 0.7)):
+        assert len(self_intersections(V, F)) == 0
+    # two overlapping spheres given as one surface: their triangles cross along a circle
+    V1, F1 = spindle([0, 0, 0], [0, 0, 2], 1.0)
+    V2, F2 = spindle([0, 0, 1], [0, 0, 3], 1.0)
+    V, F = np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)])
+    pairs = self_intersections(V, F)
+    assert len(pairs) > 10
+    assert np.all((pairs[:, 0] < len(F1)) != (pairs[:, 1] < len(F1)))   # each pair: one from each sphere
+    # a bone surface folded through itself is meshed and reported
+    path = _parts_file(str(tmp_path), SMALL, {"humerus": (V * [0.35, 0.35, 1.0], F),
+                                              "forearm": _cap(FOREARM["p0"], FOREARM["p1"], FOREARM["r"]),
+                                              "biceps": _spin(BICEPS["p0"], BICEPS["p1"], BICEPS["r"])})
+    a = author(path)
+    assert any("'humerus': its surface intersects itself" in d for d in a.report["defects"]), a.report["defects"]

@@ -2,13 +2,15 @@
 reads) meshed into ONE conforming, labelled tet mesh, a Scene and a scene
 file (`emu mesh PARTS.toml --out DIR`).
 
-The mesher is fTetWild through pytetwild's CSG entry (a dependency): the union of all surfaces, every tet labelled with the input
-surface that holds it by fTetWild's winding-number test, so surfaces with
-small holes or overlaps still mesh. Overlap rule: where surfaces overlap the
-part listed later in the mesher's order wins, and that order is muscles,
-then tendons, then bones (each kind in the parts file's order): overlap goes
-to the bone, and the muscle shares the interface's vertices with it (its
-attachment). The parts file::
+The mesher is fTetWild through pytetwild's CSG entry (a dependency): the
+union of all surfaces, every tet labelled with the input surface that holds
+it by fTetWild's winding-number test, so surfaces with small holes or
+overlaps still mesh. Overlap rule: where surfaces overlap the part listed
+later in the mesher's order wins, and that order is muscles, then tendons,
+then bones (each kind in the parts file's order): overlap goes to the bone,
+and the muscle shares the interface's vertices with it (its attachment); a
+tendon surface overlapping a muscle's end takes that end. Two muscles (or two
+tendons) that overlap are reported as a defect. The parts file::
 
     [mesh]
     tets = 15000              # approximate target; or edge_length = 0.2 (surface units)
@@ -51,7 +53,7 @@ from .fibers import laplace_fibers
 from .scene import Scene
 
 __all__ = ["PartSpec", "JointSpec", "PartsFile", "AuthoredScene", "read_parts", "read_surface",
-           "surface_defects", "tetrahedralize", "author", "write_authored", "AuthoringError"]
+           "surface_defects", "self_intersections", "tetrahedralize", "author", "write_authored", "AuthoringError"]
 
 KINDS = ("muscle", "tendon", "bone")
 # Mesher order (later wins an overlap): bones last, so overlap goes to the bone.
@@ -61,6 +63,10 @@ JOINT_GAP = 3.0
 # fTetWild's tets per volume for an ideal edge length e, with its coarsening on:
 # about V / (TETS_PER_EDGE_CUBE e^3) tets (measured on capsules and spindles: 0.03-0.05).
 TETS_PER_EDGE_CUBE = 0.04
+# Soft parts overlapping each other: a sample of OVERLAP_SAMPLE tets of the part
+# that took the overlap, reported when more than OVERLAP_REPORTED of it lies
+# inside the other's surface.
+OVERLAP_SAMPLE, OVERLAP_REPORTED = 64, 0.05
 # A muscle with one attachment runs its fibres from it to the far end: the
 # muscle's vertices at least this fraction of its largest distance from the attachment.
 FAR_END = 0.95
@@ -241,6 +247,60 @@ def surface_defects(F: np.ndarray) -> dict:
     return {"open_edges": int(np.sum(count == 1)), "nonmanifold_edges": int(np.sum(count > 2))}
 
 
+def self_intersections(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(k, 2) pairs of triangles of the surface (V, F) that cross each other
+    (pairs sharing a vertex are not tested): a broad phase on a uniform grid of
+    cells two mean edges wide, then an edge-triangle test both ways."""
+    V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    tri = V[F]
+    edge = float(np.mean(np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1)))
+    if not edge > 0:
+        return np.zeros((0, 2), np.int64)
+    lo = tri.min(axis=1)
+    c0 = np.floor((lo - V.min(axis=0)) / (2 * edge)).astype(np.int64)
+    c1 = np.floor((tri.max(axis=1) - V.min(axis=0)) / (2 * edge)).astype(np.int64)
+    cells = {}
+    for t in range(len(F)):
+        for i in range(c0[t, 0], c1[t, 0] + 1):
+            for j in range(c0[t, 1], c1[t, 1] + 1):
+                for k in range(c0[t, 2], c1[t, 2] + 1):
+                    cells.setdefault((i, j, k), []).append(t)
+    pairs = set()
+    for ts in cells.values():
+        for x in range(len(ts)):
+            for y in range(x + 1, len(ts)):
+                pairs.add((ts[x], ts[y]))
+    if not pairs:
+        return np.zeros((0, 2), np.int64)
+    P = np.array(sorted(pairs), np.int64)
+    shared = (F[P[:, 0]][:, :, None] == F[P[:, 1]][:, None, :]).any(axis=(1, 2))
+    P = P[~shared]
+    hit = np.zeros(len(P), bool)
+    for a, b in ((0, 1), (1, 0)):   # the edges of one triangle against the other
+        T = tri[P[:, b]]
+        for e0, e1 in ((0, 1), (1, 2), (2, 0)):
+            hit |= _segment_hits_triangle(tri[P[:, a], e0], tri[P[:, a], e1], T)
+    return P[hit]
+
+
+def _segment_hits_triangle(p, q, T, eps: float = 1e-12) -> np.ndarray:
+    """Whether segments p -> q (k, 3) cross triangles T (k, 3, 3) (Moller and
+    Trumbore's ray-triangle test, kept to the segment, touching excluded)."""
+    d = q - p
+    e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
+    h = np.cross(d, e2)
+    a = np.einsum("ij,ij->i", e1, h)
+    ok = np.abs(a) > eps * np.linalg.norm(d, axis=1) * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
+    s = p - T[:, 0]
+    u = f * np.einsum("ij,ij->i", s, h)
+    qv = np.cross(s, e1)
+    v = f * np.einsum("ij,ij->i", d, qv)
+    t = f * np.einsum("ij,ij->i", e2, qv)
+    tol = 1e-9
+    return ok & (u > tol) & (v > tol) & (u + v < 1 - tol) & (t > tol) & (t < 1 - tol)
+
+
 def surface_volume(V: np.ndarray, F: np.ndarray) -> float:
     """The enclosed volume (divergence theorem; its sign tells the orientation)."""
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
@@ -413,6 +473,11 @@ def author(parts, *, quiet: bool = True, threads: int = 0, epsilon: float = 1e-3
             V, F = (np.asarray(a) for a in p.surface)
         vol = surface_volume(V, F)
         d = surface_defects(F)
+        crossing = self_intersections(V, F)
+        if len(crossing):
+            where = np.round(V[F[crossing[0, 0]]].mean(axis=0), 4).tolist()
+            defects.append(f"part '{p.name}': its surface intersects itself ({len(crossing)} pair(s) of triangles "
+                           f"cross, e.g. near {where}); meshed by winding numbers as it is: check the shape")
         if d["open_edges"] or d["nonmanifold_edges"]:
             defects.append(f"part '{p.name}': its surface is not closed "
                            f"({d['open_edges']} open edge(s), {d['nonmanifold_edges']} non-manifold); meshed by "
@@ -440,7 +505,33 @@ def author(parts, *, quiet: bool = True, threads: int = 0, epsilon: float = 1e-3
         if inside.mean() < 0.5:
             raise AuthoringError(f"part '{p.name}': the mesher labelled tets outside its surface "
                                  f"({np.sum(~inside)} of {len(sample)} sampled); report this with the surfaces")
+    defects += _soft_overlaps(spec, surfaces, points, tets, part, order)
     return _build_scene(spec, points, tets, part, edge, defects, mesh_s, t0)
+
+
+def _soft_overlaps(spec: PartsFile, surfaces, points, tets, part, order) -> list:
+    """Defects for soft parts of one kind that overlap each other (the rule gives
+    overlap to bones, and a tendon overlapping a muscle takes the overlap: a
+    tendon surface given as a part; between two muscles, or two tendons, the
+    later in the parts file takes it, and that is reported):
+    for each pair, the share of the winner's tets (a sample of up to
+    OVERLAP_SAMPLE) that lie inside the loser's surface, reported above
+    OVERLAP_REPORTED."""
+    out = []
+    rank = {i: k for k, i in enumerate(order)}
+    soft = [i for i, p in enumerate(spec.parts) if p.kind != "bone"]
+    for i in soft:
+        for j in soft:
+            if rank[j] <= rank[i] or spec.parts[i].kind != spec.parts[j].kind:
+                continue   # j wins the overlap of i and j; a tendon over a muscle's end is meant
+            own = np.flatnonzero(part == j)
+            sample = own[np.linspace(0, len(own) - 1, min(len(own), OVERLAP_SAMPLE)).astype(int)]
+            share = float(np.mean(winding_numbers(*surfaces[i], points[tets[sample]].mean(axis=1)) > 0.5))
+            if share > OVERLAP_REPORTED:
+                a, b = spec.parts[i].name, spec.parts[j].name
+                out.append(f"parts '{a}' and '{b}' overlap: about {share:.0%} of '{b}' lies inside '{a}''s surface "
+                           f"and went to '{b}' (soft parts overlap only by mistake: separate the surfaces)")
+    return out
 
 
 def _build_scene(spec: PartsFile, points, tets, part, edge, defects, mesh_s, t0) -> AuthoredScene:
@@ -494,6 +585,12 @@ def _build_scene(spec: PartsFile, points, tets, part, edge, defects, mesh_s, t0)
     attachments = [{"part": a, "bone": b, "area": float(areas[i, j])}
                    for i, a in enumerate(out_names) if out_kinds[i] != "bone"
                    for j, b in enumerate(out_names) if out_kinds[j] == "bone" and areas[i, j] > 0]
+    slivers = scene.mesh_report.slivers
+    for k, n in enumerate(out_names):
+        bad = np.intersect1d(slivers, scene.parts[n].tets)
+        if len(bad):
+            defects.append(f"part '{n}': {len(bad)} sliver tet(s) (quality below 0.05, e.g. tet {bad[0]}): they "
+                           "solve, but stiffen the part locally; a smaller edge_length usually removes them")
     report = {
         "tets": int(len(tets)), "vertices": int(len(points)), "edge_length": float(edge),
         "mesh_seconds": float(mesh_s), "seconds": float(time.perf_counter() - t0),

@@ -146,6 +146,10 @@ class ContactTerm:
             vp = self.vertex_part
             self.mesh.can_collide = ipctk.CollisionFilter(lambda i, j: bool(allowed[vp[i], vp[j]]))
             self._python_filter = True
+            # for the rest of the process, not per call: set back to more threads
+            # between calls, a worker still awake from the last parallel call took
+            # a filter task and waited for the GIL forever (docs/DESIGN.md, "Contact")
+            ipctk.set_num_threads(1)
         else:
             # pairs may touch exactly when their patches differ: ipctk's own filter
             self.mesh.can_collide = ipctk.make_vertex_patches_filter(patch[self.vertex_part].astype(np.int32))
@@ -184,16 +188,11 @@ class ContactTerm:
     # --------------------------------------------------------------- geometry
     @contextmanager
     def _broad_phase(self):
-        """ipctk's thread count for a call that filters pairs (see __init__)."""
-        if not self._python_filter:
-            yield
-            return
-        threads = self._ipctk.get_num_threads()
-        self._ipctk.set_num_threads(1)
-        try:
-            yield
-        finally:
-            self._ipctk.set_num_threads(threads)
+        """A call that filters pairs: ipctk on one thread (set in __init__ and
+        checked here, since something else may have raised it since)."""
+        if self._python_filter and self._ipctk.get_num_threads() != 1:
+            self._ipctk.set_num_threads(1)
+        yield
 
     def surface_positions(self, x) -> np.ndarray:
         """The collision vertices' rows of x (#V by 3)."""
