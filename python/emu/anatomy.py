@@ -17,9 +17,11 @@ Sizes are in metres (an adult's arm at about half scale, as the box arm).
 target of ANATOMY_TETS x resolution^2 tets; measured: about 2k tets at 1, 4k
 at 2 and 7k at 3 (the arm; the leg and the neck a little more), meshed in
 3, 10 and 20 s. fTetWild's meshes differ slightly from run to run (6.7k or
-6.9k tets for the same arm), so each is built once per machine and cached
-in EMU_CACHE_DIR (default: the user's cache folder, emu/anatomy), keyed by
-the shapes and the resolution.
+6.9k tets for the same arm), so resolutions 1 to 3 ship with the package
+(emu/data/anatomy: every machine solves the same mesh, and nothing is meshed
+on first use); other resolutions are built once per machine and cached in
+EMU_CACHE_DIR (default: the user's cache folder, emu/anatomy). Both are keyed
+by the shapes and the resolution: a changed shape is meshed afresh.
 """
 from __future__ import annotations
 
@@ -39,6 +41,9 @@ __all__ = ["arm", "leg", "neck", "cache_dir", "ANATOMY_TETS"]
 ANATOMY_TETS = 700
 # Bump when a shape changes: the cache key holds it.
 _VERSION = 1
+# The meshes that ship with the package (_rebuild_shipped() remeshes them).
+SHIPPED_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "anatomy")
+SHIPPED_RESOLUTIONS = (1, 2, 3)
 
 
 def cache_dir() -> str:
@@ -128,10 +133,12 @@ def _build(name: str, resolution: int, progress=None) -> dict:
     if not (isinstance(resolution, (int, np.integer)) and resolution >= 1):
         raise ValueError(f"resolution must be an integer >= 1, got {resolution!r}")
     parts, joints = _SHAPES[name](_rings(int(resolution)))
-    path = os.path.join(cache_dir(), _key(name, int(resolution), parts, joints))
-    if os.path.exists(path):
-        with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
+    key = _key(name, int(resolution), parts, joints)
+    path = os.path.join(cache_dir(), key)
+    for found in (os.path.join(SHIPPED_DIR, key), path):
+        if os.path.exists(found):
+            with np.load(found, allow_pickle=False) as z:
+                return {k: z[k] for k in z.files}
     if progress:
         progress(f"meshing the built-in {name} at resolution {resolution} (once; cached in {cache_dir()})")
     spec = PartsFile(path="", parts=parts, joints=joints, tets=int(ANATOMY_TETS * resolution ** 2))
@@ -185,3 +192,20 @@ def leg(resolution: int = 3, *, muscle_youngs: float = 6e4, max_activation: floa
 def neck(resolution: int = 3, *, muscle_youngs: float = 6e4, max_activation: float = 1e5, progress=None) -> Scene:
     """The smooth neck (module docstring): four muscles turn the head on its ball joint."""
     return _scene("neck", resolution, muscle_youngs=muscle_youngs, max_activation=max_activation, progress=progress)
+
+
+def _rebuild_shipped() -> None:
+    """Mesh the shipped resolutions afresh into SHIPPED_DIR (after a shape changed)."""
+    import glob
+    import tempfile
+    for old in glob.glob(os.path.join(SHIPPED_DIR, "*.npz")):
+        os.remove(old)
+    os.makedirs(SHIPPED_DIR, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        os.environ["EMU_CACHE_DIR"] = tmp
+        for name in _SHAPES:
+            for r in SHIPPED_RESOLUTIONS:
+                _build(name, r, progress=print)
+        for f in sorted(os.listdir(os.path.join(tmp, "anatomy"))):
+            os.replace(os.path.join(tmp, "anatomy", f), os.path.join(SHIPPED_DIR, f))
+            print("shipped", f)

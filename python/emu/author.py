@@ -2,7 +2,7 @@
 reads) meshed into ONE conforming, labelled tet mesh, a Scene and a scene
 file (`emu mesh PARTS.toml --out DIR`).
 
-The mesher is fTetWild through pytetwild's CSG entry (a dependency): the
+The mesher is fTetWild through pytetwild's CSG entry (the extra emu[mesh]): the
 union of all surfaces, every tet labelled with the input surface that holds
 it by fTetWild's winding-number test, so surfaces with small holes or
 overlaps still mesh. Overlap rule: where surfaces overlap the part listed
@@ -344,8 +344,8 @@ def _mesher():
     try:
         from pytetwild import PyfTetWildWrapper
     except ImportError as e:
-        raise ImportError("emu's mesher is fTetWild, from the package pytetwild (an emu dependency): "
-                          f"pip install 'pytetwild>=0.2.3,<0.4' [{e}]") from None
+        raise ImportError("emu's mesher is fTetWild, from the package pytetwild, an optional extra: "
+                          f"pip install 'emu[mesh]' (or 'pytetwild>=0.2.3,<0.4') [{e}]") from None
     return PyfTetWildWrapper
 
 
