@@ -90,6 +90,18 @@ def bone_chain_scene():
     return emu.scenes.chain(1)
 
 
+def bone_loop_scene():
+    """A closed loop of joints: movable "b" and "c" hinged to each other and each
+    to the fixed "a"; muscle "m" from a to b. EMU solves it, FEM refuses it."""
+    pts, tets, lab = emu.meshes.block_mesh({"a": [(0, 0), (3, 1)], "b": [(1, 1)], "c": [(2, 2)], "m": [(0, 1)]}, 1)
+    s = emu.Scene(pts, tets)
+    s.add_bone("a", lab == 0)
+    s.add_bone("b", lab == 1, fixed=False)
+    s.add_bone("c", lab == 2, fixed=False)
+    s.add_muscle("m", lab == 3, [1, 1, 0])
+    return s
+
+
 # Small scenes of each kind (a pinned muscle with tendons, a forearm on a hinge,
 # a head on a ball joint) with their activation, for tests that compare EMU
 # with the converged FEM answer (fixture scene_with_fem).

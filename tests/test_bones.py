@@ -5,7 +5,7 @@ import pytest
 import emu
 from emu.bones import bone_motion, signed_angle
 from emu.scenes import arm
-from conftest import bone_chain_scene, gap_scene, shared_path
+from conftest import bone_chain_scene, bone_loop_scene, gap_scene, shared_path
 
 
 def hinge_vertices(scene, a, b):
@@ -183,22 +183,102 @@ def test_movable_bone_errors(small_arm):
 
 
 def test_joint_between_two_movable_bones(small_arm):
-    """EMU handles a chain (the joint as constraint rows); the FEM reference says
-    it does not, naming the bones."""
+    """A chain (fixed a, b hinged to a, c hinged to b): both solvers hold both
+    hinges, and EMU at accuracy 0.01 is within 1% of the converged FEM answer."""
     s = bone_chain_scene()
     kinds = {tuple(sorted(j.bones)): j.kind for j in s.joints()}
     assert kinds[("a", "b")] == "hinge" and kinds[("b", "c")] == "hinge"
-    with pytest.raises(ValueError, match="two movable bones"):
-        emu.Solver(s, "fem")
-    sol = emu.Solver(s, "emu").solve({"m1": 0.2, "m2": 0.2}, normalized=True)
-    assert sol.converged, sol.status
+    act = {"m1": 0.2, "m2": 0.2}
+    fem = emu.Solver(s, "fem", rtol_grad=1e-9).solve(act, normalized=True)
+    ours = emu.Solver(s, "emu", accuracy=0.01).solve(act, normalized=True)
     jb = [j for j in s.joints() if set(j.bones) == {"b", "c"}][0].vertices
-    for bone in ("b", "c"):
-        assert bone_motion(s, sol, bone).rigidity < 1e-5
-    # the shared hinge vertices sit where both bones put them
-    for bone in ("b", "c"):
-        bm = bone_motion(s, sol, bone)
-        np.testing.assert_allclose(s.points[jb] @ bm.R.T + bm.t, sol.positions[jb], atol=1e-5)
+    for sol in (fem, ours):
+        assert sol.converged, sol.status
+        for bone in ("b", "c"):
+            bm = bone_motion(s, sol, bone)
+            assert bm.rigidity < 1e-5
+            # the shared hinge vertices sit where both bones put them
+            np.testing.assert_allclose(s.points[jb] @ bm.R.T + bm.t, sol.positions[jb], atol=1e-5)
+    turns = [signed_angle(bone_motion(s, fem, b).R, [0, 0, 1]) for b in ("b", "c")]
+    assert abs(turns[0]) > 1 and abs(turns[1] - turns[0]) > 1, turns   # both hinges turned
+    err = np.abs(ours.positions - fem.positions).max() / np.linalg.norm(np.ptp(s.points, axis=0))
+    assert err < 0.01, (err, ours.error_estimate)
+
+
+def _chain(movable=True):
+    """emu.scenes.chain(1) with b and c movable, or fixed for scripting."""
+    s = bone_chain_scene()
+    if movable:
+        return s
+    pts, tets = s.points, s.tets
+    t = emu.Scene(pts, tets)
+    t.add_bone("a", s.parts["a"].tets)
+    for b in ("b", "c"):
+        t.add_bone(b, s.parts[b].tets)
+    for m in ("m1", "m2", "m3"):
+        t.add_muscle(m, s.parts[m].tets, [1.0, 1.0, 0.0])
+    return t
+
+
+def test_fem_chain_equilibrium_is_the_minimum_over_scripted_angles():
+    """Independent check of the chain's Newton: the same scene with b and c
+    scripted (fixed, posed) at angles around FEM's answer has its lowest
+    energy at FEM's angles, and lands on FEM's positions there."""
+    s = _chain()
+    act = {"m1": 0.2, "m2": 0.3}
+    free = emu.Solver(s, "fem", rtol_grad=1e-9).solve(act, normalized=True)
+    hinge = {k: [j for j in s.joints() if set(j.bones) == set(k)][0] for k in (("a", "b"), ("b", "c"))}
+    pivot = {b: s.points[hinge[k].vertices].mean(axis=0) for b, k in (("b", ("a", "b")), ("c", ("b", "c")))}
+    tb = signed_angle(bone_motion(s, free, "b").R, [0, 0, 1])
+    tc = signed_angle(bone_motion(s, free, "c").R, [0, 0, 1]) - tb
+    solver = emu.Solver(_chain(movable=False), "fem", rtol_grad=1e-9)
+
+    def energy(db, dc):
+        Rb, t_b = emu.pose_about([0, 0, 1], tb + db, pivot["b"])
+        Rc, t_c = emu.pose_about([0, 0, 1], tc + dc, pivot["c"])
+        poses = {"b": (Rb, t_b), "c": (Rb @ Rc, Rb @ t_c + t_b)}   # c turns about its hinge, then with b
+        sol = solver.solve(act, normalized=True, bone_poses=poses)
+        assert sol.converged, sol.status
+        return sol.energy, sol
+
+    E0, sol0 = energy(0, 0)
+    np.testing.assert_allclose(sol0.positions, free.positions, atol=1e-6)
+    np.testing.assert_allclose(E0, free.energy, rtol=1e-8)
+    for d in ((-0.5, 0), (0.5, 0), (0, -0.5), (0, 0.5), (0.4, -0.4), (0.4, 0.4)):
+        assert energy(*d)[0] > E0, d
+
+
+def test_chain_loop_is_refused_by_fem():
+    """b hinged to the fixed a, c hinged to b and to a: a closed loop, which
+    reduced joint coordinates cannot take; FEM says so, naming the fix."""
+    with pytest.raises(ValueError, match="loop of joints"):
+        emu.Solver(bone_loop_scene(), "fem")
+
+
+def test_a_chain_bone_nothing_turns_is_reported_as_a_neutral_mode():
+    """c on a ball joint at the end of the chain a -> b -> c with no muscle on
+    c: its turns are free. Both solvers converge, turn b and name c; FEM
+    leaves c's turn relative to b alone (EMU's world orientation: either is an
+    equilibrium), and both keep c on its joint."""
+    pts, tets, lab = emu.meshes.block_mesh(
+        {"a": [(0, 0, 0)], "b": [(1, 1, 0)], "c": [(2, 2, 1)], "m": [(1, 0, 0)]}, 1)
+    s = emu.Scene(pts, tets)
+    s.add_bone("a", lab == 0)
+    s.add_bone("b", lab == 1, fixed=False)
+    s.add_bone("c", lab == 2, fixed=False)
+    s.add_muscle("m", lab == 3, [1, 1, 0])
+    assert sorted(j.kind for j in s.joints()) == ["ball", "hinge"]
+    for method in ("fem", "emu"):
+        with pytest.warns(emu.NeutralModeWarning, match="bone 'c' can turn"):
+            sol = emu.Solver(s, method).solve({"m": 0.5}, normalized=True)
+        assert sol.converged, sol.status
+        assert {b for b, _ in sol.neutral_modes} == {"c"}
+        b, c = bone_motion(s, sol, "b"), bone_motion(s, sol, "c")
+        assert b.angle_deg > 1 and c.rigidity < 1e-6
+        (j,) = [j for j in s.joints() if set(j.bones) == {"b", "c"}]
+        np.testing.assert_allclose(s.points[j.vertices] @ b.R.T + b.t, sol.positions[j.vertices], atol=1e-9)
+        if method == "fem":   # c turns only with b
+            assert np.degrees(np.arccos(np.clip((np.trace(b.R.T @ c.R) - 1) / 2, -1, 1))) < 1e-3
 
 
 # ------------------------------------------------------------- ball joint

@@ -10,7 +10,7 @@ import pytest
 import emu
 from emu.scenes import arm, fusiform, neck
 
-from conftest import bone_chain_scene
+from conftest import bone_chain_scene, bone_loop_scene
 
 
 @pytest.mark.parametrize("alpha", [10.0, 100.0, 1000.0])
@@ -58,10 +58,21 @@ def test_no_estimate_for_fem_or_when_switched_off():
 
 
 def test_no_estimate_where_fem_cannot_solve_the_scene_says_why():
-    s = bone_chain_scene()
-    sol = emu.Solver(s, "emu").solve({"m1": 0.2}, normalized=True)
+    s = bone_loop_scene()   # a closed loop of joints: EMU only
+    sol = emu.Solver(s, "emu").solve({"m": 0.2}, normalized=True)
     assert sol.converged and sol.error_estimate is None
-    assert "two movable bones" in sol.error_estimate_note
+    assert "loop of joints" in sol.error_estimate_note
+
+
+def test_estimate_on_a_chain_of_bones():
+    """FEM solves chains, so EMU on one has its estimate, within [0.5, 2] of the true error."""
+    s = bone_chain_scene()
+    act = {"m1": 0.2, "m2": 0.2}
+    sol = emu.Solver(s, "emu", alpha=30.0).solve(act, normalized=True)
+    fem = emu.Solver(s, "fem", rtol_grad=1e-9).solve(act, normalized=True)
+    true = np.abs(sol.positions - fem.positions).max() / np.linalg.norm(np.ptp(s.points, axis=0))
+    assert sol.converged and true > 1e-4, (sol.status, true)
+    assert 0.5 <= sol.error_estimate / true <= 2, (sol.error_estimate, true)
 
 
 def test_correction_hessian_choices():

@@ -1,6 +1,7 @@
 """FEM's rigid bones against finite differences: the gradient and the bordered
 Newton matrix in the solver's reduced unknowns (free soft displacements, then
-each movable bone's exponential-map turn and, for a free bone, translation).
+each movable bone's exponential-map turn and, for a free bone, translation),
+for single bones and for chains (a bone jointed to a movable bone turns with it).
 
 E(z) is the energy at increment z from a state x0 (FemSolver.reduced_energy,
 which moves the bones by exp([w]_x) R); the solver's own gradient and dense
@@ -22,27 +23,42 @@ SCENES = {
     "free": {"base": [(0, 0, 0)], "m": [(1, 0, 0)], "loose": [(2, 0, 0)]},
 }
 DOFS = {"hinge": 1, "ball": 3, "free": 6}
+# chains: a second movable bone "tip" jointed to "loose" (an edge: hinge; a
+# vertex: ball) and a second muscle "m2" between them
+CHAINS = {
+    "hinge-hinge": {"base": [(0, 0, 0)], "m": [(1, 0, 0)], "loose": [(1, 1, 0)], "tip": [(2, 2, 0)],
+                    "m2": [(2, 1, 0)]},
+    "ball-hinge": {"base": [(0, 0, 0)], "m": [(1, 0, 0)], "loose": [(1, 1, 1)], "tip": [(2, 2, 1)],
+                   "m2": [(2, 1, 1)]},
+    "free-ball": {"base": [(0, 0, 0)], "m": [(1, 0, 0)], "loose": [(2, 0, 0)], "tip": [(3, 1, 1)],
+                  "m2": [(3, 0, 0)]},
+}
+DOFS.update({"hinge-hinge": 2, "ball-hinge": 4, "free-ball": 9})
 
 
 def scene(kind, stiffness=0.0):
-    pts, tets, lab = block_mesh(SCENES[kind], 2)
+    pts, tets, lab = block_mesh({**SCENES, **CHAINS}[kind], 2)
     s = emu.Scene(pts, tets, warn=False)
     s.add_bone("base", lab == 0)
     s.add_muscle("m", lab == 1, [1.0, 0.3, 0.1])
     s.add_bone("loose", lab == 2, fixed=False, joint_stiffness=stiffness)
+    if kind in CHAINS:
+        s.add_bone("tip", lab == 3, fixed=False, joint_stiffness=0.7 * stiffness)
+        s.add_muscle("m2", lab == 4, [0.2, 1.0, 0.3])
     s.gravity = [0.0, -9.81, 0.0]
     return s
 
 
 def state(s):
-    """A state away from equilibrium with the bone turned: two FEM iterations."""
+    """A state away from equilibrium with the bones turned: two FEM iterations."""
+    act = {m: 0.6 for m in s.muscles}
     solver = emu.Solver(s, "fem", max_iterations=2)
-    x0 = solver.solve({"m": 0.6}, normalized=True).positions
-    load = solver.load_case({"m": 0.6}, normalized=True)
+    x0 = solver.solve(act, normalized=True).positions
+    load = solver.load_case(act, normalized=True)
     return solver._core, load, np.asarray(x0)
 
 
-@pytest.mark.parametrize("kind", ["hinge", "ball", "free"])
+@pytest.mark.parametrize("kind", ["hinge", "ball", "free", "hinge-hinge", "ball-hinge", "free-ball"])
 def test_bone_gradient_and_bordered_hessian_match_finite_differences(kind):
     s = scene(kind, stiffness=0.3)
     core, load, x0 = state(s)
@@ -80,10 +96,18 @@ def test_bone_gradient_and_bordered_hessian_match_finite_differences(kind):
         cross = (q(b + soft) - q(b - soft)) / 4
         assert abs(cross - b @ H @ soft) <= 5e-3 * np.abs(H).max() ** 0.5 * np.abs(H[-nd:]).max() ** 0.5 + \
             2e-3 * abs(b @ H @ soft), (kind, cross, b @ H @ soft)
+    # bone-bone entries (a chain's turns of one bone about another's) by polarisation
+    for i in range(nd):
+        for j in range(i + 1, nd):
+            bi, bj = np.eye(n)[n - nd + i], np.eye(n)[n - nd + j]
+            q = lambda v: (E(hh * v) - 2 * E0 + E(-hh * v)) / hh**2  # noqa: E731
+            cross = (q(bi + bj) - q(bi - bj)) / 4
+            assert abs(cross - H[n - nd + i, n - nd + j]) <= 2e-4 * np.abs(H[-nd:, -nd:]).max(), \
+                (kind, i, j, cross, H[n - nd + i, n - nd + j])
     assert np.abs(H - H.T).max() <= 1e-10 * np.abs(H).max()
 
 
-@pytest.mark.parametrize("kind", ["hinge", "ball", "free"])
+@pytest.mark.parametrize("kind", ["hinge", "ball", "free", "ball-hinge", "free-ball"])
 def test_filtered_bordered_hessian_is_positive_semidefinite(kind):
     s = scene(kind)
     core, load, x0 = state(s)

@@ -83,7 +83,6 @@ def chain(resolution: int = 1, *, block: float = 1.0) -> Scene:
     "a", movable bone "b" hinged to it (they share one block edge along z), movable
     "c" hinged to "b" (a joint between two movable bones), muscle "m1" from a to b,
     "m2" from b to c and "m3" from c back to a, each with fibres along (1, 1, 0).
-    EMU only: the FEM solver refuses joints between two movable bones.
 
     8 blocks of 6 resolution^3 tets (resolution 1: 48 tets)."""
     points, tets, labels = block_mesh(

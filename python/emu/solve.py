@@ -698,7 +698,7 @@ class Solver:
                 opts.set_contact(self.contact)
             try:
                 self._estimator = _core.FemSolver(self.model, opts)
-            except ValueError as e:   # e.g. a joint between two movable bones
+            except ValueError as e:   # e.g. a closed loop of joints (FEM takes trees of bones)
                 self._estimator_error = f"no error estimate: {e}"
         if self._estimator is None:
             return None, 0.0, self._estimator_error

@@ -463,7 +463,7 @@ class FemSolver::Newton {
     Eigen::MatrixXd S = Hbb_ - Hsb_.transpose() * Wsb_;
     S = 0.5 * (S + S.transpose()).eval();
     const Eigen::VectorXd rb = -gb_ + Hsb_.transpose() * y_;
-    if (!s_.bones_.solve_schur(S, rb, exact, db_, neutral_)) return false;
+    if (!s_.bones_.solve_schur(poses_, S, rb, exact, db_, neutral_)) return false;
     ds_ = -y_ - Wsb_ * db_;
     keep_bone_border(S);
     return true;

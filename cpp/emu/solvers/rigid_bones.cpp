@@ -1,6 +1,9 @@
 #include "emu/solvers/rigid_bones.h"
 
+#include <algorithm>
 #include <cmath>
+#include <map>
+#include <utility>
 #include <stdexcept>
 #include <string>
 
@@ -14,14 +17,7 @@ namespace emu {
 
 RigidBones::RigidBones(const Model& model, const UnknownLayout& layout)
     : model_(model), layout_(layout), diag_(bbox_diagonal(model.rest)), bones_(layout.num_bones) {
-  for (size_t i = 0; i < layout.joints.size(); ++i) {
-    const JointPoint& j = layout.joints[i];
-    if (j.other >= 0)
-      throw std::invalid_argument("the FEM solver does not support joints between two movable bones yet (bones " +
-                                  std::to_string(j.bone) + " and " + std::to_string(j.other) +
-                                  "); use method='emu' or fix one bone");
-    bones_[j.bone].anchors.push_back(static_cast<int>(i));
-  }
+  build_forest();
   for (Eigen::Index t = 0; t < model.tets.rows() && layout.num_bones; ++t) {
     if (layout.is_bone_tet(t)) continue;
     for (int a = 0; a < 4; ++a)
@@ -33,39 +29,103 @@ RigidBones::RigidBones(const Model& model, const UnknownLayout& layout)
   for (Eigen::Index v = 0; v < model.rest.rows(); ++v)
     if (layout.vertex_bone(v) >= 0) bones_[layout.vertex_bone(v)].vertices.push_back(static_cast<int>(v));
   for (int b = 0; b < layout.num_bones; ++b) {
-    Bone& B = bones_[b];
-    if (B.anchors.empty()) {
-      B.kind = Kind::Free;
-      B.dofs = 6;
-      B.P = layout.bone_center.row(b).transpose();
-    } else {
-      const Vec3 X0 = layout.joints[B.anchors[0]].rest;
-      for (size_t i = 1; i < B.anchors.size(); ++i)
-        if (B.axis_end < 0 && (layout.joints[B.anchors[i]].rest - X0).norm() > 1e-9 * diag_)
-          B.axis_end = static_cast<int>(i);
-      B.kind = B.axis_end < 0 ? Kind::Ball : Kind::Hinge;
-      B.dofs = B.axis_end < 0 ? 3 : 1;
-      if (B.axis_end >= 0) {
-        const Vec3 a = (layout.joints[B.anchors[B.axis_end]].rest - X0).normalized();
-        for (int i : B.anchors) {
-          const Vec3 r = layout.joints[i].rest - X0;
-          if ((r - r.dot(a) * a).norm() > 1e-6 * diag_)
-            throw std::invalid_argument("movable bone " + std::to_string(b) +
-                                        " is welded: its joints with pinned vertices or fixed bones are not on "
-                                        "one line; fix the bone instead");
-        }
-      }
-      B.P = X0;
+    set_kind(b);
+    bones_[b].offset = dofs_;
+    dofs_ += bones_[b].dofs;
+  }
+}
+
+void RigidBones::build_forest() {
+  const int nb = size();
+  // Joint points per bone with the world, and per pair of movable bones.
+  std::vector<std::vector<int>> world(nb);
+  std::map<std::pair<int, int>, std::vector<int>> links;
+  for (size_t i = 0; i < layout_.joints.size(); ++i) {
+    const JointPoint& j = layout_.joints[i];
+    if (j.other < 0) world[j.bone].push_back(static_cast<int>(i));
+    else links[{std::min(j.bone, j.other), std::max(j.bone, j.other)}].push_back(static_cast<int>(i));
+  }
+  std::vector<std::vector<int>> neighbours(nb);
+  for (const auto& link : links) {
+    neighbours[link.first.first].push_back(link.first.second);
+    neighbours[link.first.second].push_back(link.first.first);
+  }
+  // Roots: the bones the world holds, then (a piece nothing holds) its lowest
+  // bone, free; every other bone hangs from the bone that reached it first.
+  std::vector<char> seen(nb, 0);
+  for (int b = 0; b < nb; ++b)
+    if (!world[b].empty()) {
+      seen[b] = 1;
+      bones_[b].anchors = world[b];
     }
-    B.offset = dofs_;
-    dofs_ += B.dofs;
+  auto grow = [&](int root) {
+    size_t head = order_.size();
+    order_.push_back(root);
+    while (head < order_.size()) {
+      const int u = order_[head++];
+      for (int w : neighbours[u]) {
+        if (w == bones_[u].parent) continue;
+        if (seen[w])
+          throw std::invalid_argument("movable bones " + std::to_string(u) + " and " + std::to_string(w) +
+                                      " close a loop of joints (through each other, pinned vertices or fixed "
+                                      "bones); the FEM solver needs the bones' joints to form a tree: fix a bone "
+                                      "of the loop or remove a joint");
+        seen[w] = 1;
+        bones_[w].parent = u;
+        bones_[w].anchors = links[{std::min(u, w), std::max(u, w)}];
+        order_.push_back(w);
+      }
+    }
+  };
+  for (int b = 0; b < nb; ++b)
+    if (!world[b].empty()) grow(b);
+  for (int b = 0; b < nb; ++b)
+    if (!seen[b]) {
+      seen[b] = 1;
+      grow(b);
+    }
+  for (int b : order_) {
+    Bone& B = bones_[b];
+    if (B.parent >= 0) B.chain = bones_[B.parent].chain;
+    B.chain.push_back(b);
+    for (int a : B.chain) bones_[a].below.push_back(b);
+  }
+}
+
+void RigidBones::set_kind(int b) {
+  Bone& B = bones_[b];
+  if (B.anchors.empty()) {
+    B.kind = Kind::Free;
+    B.dofs = 6;
+    B.P = layout_.bone_center.row(b).transpose();
+    return;
+  }
+  const Vec3 X0 = layout_.joints[B.anchors[0]].rest;
+  for (size_t i = 1; i < B.anchors.size(); ++i)
+    if (B.axis_end < 0 && (layout_.joints[B.anchors[i]].rest - X0).norm() > 1e-9 * diag_)
+      B.axis_end = static_cast<int>(i);
+  B.kind = B.axis_end < 0 ? Kind::Ball : Kind::Hinge;
+  B.dofs = B.axis_end < 0 ? 3 : 1;
+  B.P = X0;
+  if (B.axis_end < 0) return;
+  const Vec3 a = (layout_.joints[B.anchors[B.axis_end]].rest - X0).normalized();
+  B.rest_axis = a;
+  for (int i : B.anchors) {
+    const Vec3 r = layout_.joints[i].rest - X0;
+    if ((r - r.dot(a) * a).norm() <= 1e-6 * diag_) continue;
+    if (B.parent >= 0)
+      throw std::invalid_argument("movable bones " + std::to_string(B.parent) + " and " + std::to_string(b) +
+                                  " are welded: the points they share are not on one line; make them one bone");
+    throw std::invalid_argument("movable bone " + std::to_string(b) +
+                                " is welded: its joints with pinned vertices or fixed bones are not on "
+                                "one line; fix the bone instead");
   }
 }
 
 BonePoses RigidBones::begin(const LoadCase& load, const Eigen::MatrixX3d& x, const Eigen::MatrixX3d* initial) {
   BonePoses poses(bones_.size());
-  for (size_t b = 0; b < bones_.size(); ++b) {
-    Bone& B = bones_[b];
+  for (int b : order_) {
+    const Bone& B = bones_[b];
     BonePose& pose = poses[b];
     // Where each joint point must be: a pinned vertex's target, a declared joint's.
     auto target = [&](int i) -> Vec3 {
@@ -80,6 +140,18 @@ BonePoses RigidBones::begin(const LoadCase& load, const Eigen::MatrixX3d& x, con
       Yb.row(i) = (initial ? *initial : model_.rest).row(B.vertices[i]);
     }
     pose.R = initial ? best_rotation(Xb, Yb) : Mat3::Identity();
+    if (B.parent >= 0) {  // on its parent's joint; a hinge turned about its axis only
+      const BonePose& q = poses[B.parent];
+      pose.p = q.R * (B.P - bones_[B.parent].P) + q.p;
+      if (B.kind == Kind::Hinge) {
+        pose.axis = q.R * B.rest_axis;
+        if (!initial) pose.R = q.R;
+        pose.R = rotation_between((pose.R * B.rest_axis).normalized(), pose.axis) * pose.R;
+      } else if (!initial) {
+        pose.R = q.R;
+      }
+      continue;
+    }
     if (B.kind == Kind::Free) {
       pose.p = Yb.colwise().mean().transpose() - pose.R * (Xb.colwise().mean().transpose() - B.P);
       continue;
@@ -93,7 +165,7 @@ BonePoses RigidBones::begin(const LoadCase& load, const Eigen::MatrixX3d& x, con
         throw std::invalid_argument("the hinge of movable bone " + std::to_string(b) +
                                     " is stretched by its pinned vertices' targets (move them rigidly)");
       pose.R = rotation_between((pose.R * rest_axis).normalized(), target_axis.normalized()) * pose.R;
-      B.axis = target_axis.normalized();
+      pose.axis = target_axis.normalized();
     }
   }
   return poses;
@@ -105,50 +177,69 @@ void RigidBones::add_vertex_hessian(const BonePoses& poses, const Eigen::MatrixX
   // Column dof j = 3 w + c of a bone vertex w: its position moves by J_w db, so
   // entry H(i, j) adds H(i, j) J_w.row(c) to row i's border (a free vertex) or,
   // through J_u.row(r)', to Hbb (a bone vertex u).
+  Eigen::Matrix<double, 3, Eigen::Dynamic> Jw(3, dofs_), Ju(3, dofs_);
   for (int j = 0; j < H.outerSize(); ++j) {
     const int w = j / 3, c = j % 3, bw = layout_.vertex_bone(w);
     if (bw < 0 || layout_.free_index(w) >= 0) continue;
-    const Bone& Bw = bones_[bw];
-    const Eigen::RowVectorXd Jw = jacobian(Bw, x.row(w).transpose() - poses[bw].p).row(c);
+    vertex_jacobian(bw, x.row(w).transpose(), poses, Jw);
     for (Eigen::SparseMatrix<double>::InnerIterator it(H, j); it; ++it) {
       const int i = static_cast<int>(it.row()), u = i / 3, r = i % 3;
       if (layout_.free_index(u) >= 0) {
-        Hsb.block(3 * layout_.free_index(u) + r, Bw.offset, 1, Bw.dofs) += it.value() * Jw;
+        Hsb.row(3 * layout_.free_index(u) + r) += it.value() * Jw.row(c);
       } else if (layout_.vertex_bone(u) >= 0) {
-        const int bu = layout_.vertex_bone(u);
-        const Bone& Bu = bones_[bu];
-        const Eigen::VectorXd Ju = jacobian(Bu, x.row(u).transpose() - poses[bu].p).row(r).transpose();
-        Hbb.block(Bu.offset, Bw.offset, Bu.dofs, Bw.dofs) += it.value() * Ju * Jw;
+        vertex_jacobian(layout_.vertex_bone(u), x.row(u).transpose(), poses, Ju);
+        Hbb += it.value() * Ju.row(r).transpose() * Jw.row(c);
       }
     }
   }
 }
 
-Eigen::Matrix<double, 3, Eigen::Dynamic> RigidBones::jacobian(const Bone& B, const Vec3& r) const {
-  // d/dw of exp([w]_x) r = w x r = -[r]_x w; a translation moves every vertex.
-  Eigen::Matrix<double, 3, Eigen::Dynamic> J(3, B.dofs);
-  if (B.kind == Kind::Hinge) {
-    J.col(0) = B.axis.cross(r);
-  } else {
-    J.leftCols<3>() = -cross_matrix(r);
-    if (B.kind == Kind::Free) J.rightCols<3>().setIdentity();
+Eigen::Matrix<double, 3, Eigen::Dynamic> RigidBones::axes(int b, const BonePoses& poses) const {
+  if (bones_[b].kind == Kind::Hinge) return poses[b].axis;
+  return Mat3::Identity();
+}
+
+void RigidBones::vertex_jacobian(int b, const Vec3& x, const BonePoses& poses,
+                                 Eigen::Matrix<double, 3, Eigen::Dynamic>& J) const {
+  // d/dtheta of exp(theta [u]_x) about pivot p: u x (x - p) = -[x - p]_x u for
+  // each bone of the chain; a free root's translation moves every vertex below it.
+  J.setZero(3, dofs_);
+  for (int a : bones_[b].chain) {
+    const Bone& A = bones_[a];
+    const Vec3 r = x - poses[a].p;
+    if (A.kind == Kind::Hinge) {
+      J.col(A.offset) = poses[a].axis.cross(r);
+    } else {
+      J.block<3, 3>(0, A.offset) = -cross_matrix(r);
+      if (A.kind == Kind::Free) J.block<3, 3>(0, A.offset + 3).setIdentity();
+    }
   }
-  return J;
 }
 
 BonePoses RigidBones::moved(const BonePoses& poses, const Eigen::VectorXd& db, double s) const {
+  // The deepest bones' increments first: bone b's turns b and everything below
+  // it about b's pivot before the step (which only the bones above b move).
   BonePoses out = poses;
-  for (size_t b = 0; b < bones_.size(); ++b) {
+  for (auto it = order_.rbegin(); it != order_.rend(); ++it) {
+    const int b = *it;
     const Bone& B = bones_[b];
     Vec3 w, t = Vec3::Zero();
     if (B.kind == Kind::Hinge) {
-      w = s * db(B.offset) * B.axis;
+      w = s * db(B.offset) * poses[b].axis;
     } else {
       w = s * db.segment<3>(B.offset);
       if (B.kind == Kind::Free) t = s * db.segment<3>(B.offset + 3);
     }
-    out[b].R = rotation_exp(w) * out[b].R;
-    out[b].p += t;
+    const Mat3 Q = rotation_exp(w);
+    const Vec3 c = poses[b].p;
+    for (int d : B.below) {
+      out[d].R = Q * out[d].R;
+      if (d != b) {
+        out[d].p = c + Q * (out[d].p - c);
+        out[d].axis = Q * out[d].axis;
+      }
+      out[d].p += t;
+    }
   }
   return out;
 }
@@ -169,17 +260,21 @@ double RigidBones::spring_energy(const BonePoses& poses) const {
 void RigidBones::gradient(const BonePoses& poses, const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& f,
                           Eigen::VectorXd& gb) const {
   gb.setZero(dofs_);
-  for (size_t b = 0; b < bones_.size(); ++b) {
-    const Bone& B = bones_[b];
-    for (int v : B.vertices)
-      gb.segment(B.offset, B.dofs) += jacobian(B, x.row(v).transpose() - poses[b].p).transpose() * f.row(v).transpose();
-  }
+  Eigen::Matrix<double, 3, Eigen::Dynamic> J(3, dofs_);
+  for (size_t b = 0; b < bones_.size(); ++b)
+    for (int v : bones_[b].vertices) {
+      vertex_jacobian(static_cast<int>(b), x.row(v).transpose(), poses, J);
+      gb.noalias() += J.transpose() * f.row(v).transpose();
+    }
+  // A spring on R_b: every turn of b's chain turns R_b (R_b <- exp([u]_x) R_b).
   const Eigen::VectorXd& k = model_.bone_stiffness;
   for (int b = 0; b < k.size(); ++b) {
-    const Bone& B = bones_[b];
     const Vec3 gw = joint_spring::expmap_gradient(poses[b].R, k(b));
-    if (B.kind == Kind::Hinge) gb(B.offset) += B.axis.dot(gw);
-    else gb.segment<3>(B.offset) += gw;
+    for (int a : bones_[b].chain) {
+      const Bone& A = bones_[a];
+      if (A.kind == Kind::Hinge) gb(A.offset) += poses[a].axis.dot(gw);
+      else gb.segment<3>(A.offset) += gw;
+    }
   }
 }
 
@@ -198,47 +293,84 @@ void RigidBones::assemble_border(const BonePoses& poses, const std::vector<doubl
                                  Eigen::MatrixXd& Hsb, Eigen::MatrixXd& Hbb) const {
   Hsb.setZero(3 * layout_.num_free, dofs_);
   Hbb.setZero(dofs_, dofs_);
+  Eigen::Matrix<double, 3, Eigen::Dynamic> Jc(3, dofs_), Ja(3, dofs_);
   for (int t : touching_) {
     const Eigen::Map<const Mat12> K(element.data() + t * 144);
     for (int c = 0; c < 4; ++c) {
       const int vc = model_.tets(t, c), bc = layout_.vertex_bone(vc);
       if (bc < 0) continue;
-      const Bone& Bc = bones_[bc];
-      const auto Jc = jacobian(Bc, x.row(vc).transpose() - poses[bc].p);
+      vertex_jacobian(bc, x.row(vc).transpose(), poses, Jc);
       for (int a = 0; a < 4; ++a) {
         const int va = model_.tets(t, a);
         const Mat3 Kac = K.block<3, 3>(3 * a, 3 * c);
         if (layout_.free_index(va) >= 0) {
-          Hsb.block(3 * layout_.free_index(va), Bc.offset, 3, Bc.dofs) += Kac * Jc;
+          Hsb.middleRows<3>(3 * layout_.free_index(va)).noalias() += Kac * Jc;
         } else if (layout_.vertex_bone(va) >= 0) {
-          const int ba = layout_.vertex_bone(va);
-          const Bone& Ba = bones_[ba];
-          Hbb.block(Ba.offset, Bc.offset, Ba.dofs, Bc.dofs) +=
-              jacobian(Ba, x.row(va).transpose() - poses[ba].p).transpose() * Kac * Jc;
+          vertex_jacobian(layout_.vertex_bone(va), x.row(va).transpose(), poses, Ja);
+          Hbb.noalias() += Ja.transpose() * (Kac * Jc);
         }
       }
     }
   }
+  add_rotation_term(poses, x, f, exact, Hbb);
+}
+
+void RigidBones::add_rotation_term(const BonePoses& poses, const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& f,
+                                   bool exact, Eigen::MatrixXd& Hbb) const {
+  // In world axes, 3 per bone of each tree: W_ab (header), then clamped to PSD
+  // per tree (filtered Newton) and projected on each bone's turn axes.
   const Eigen::VectorXd& k = model_.bone_stiffness;
-  for (size_t b = 0; b < bones_.size(); ++b) {
-    const Bone& B = bones_[b];
-    Mat3 G = Mat3::Zero();
-    for (int v : B.vertices) {
-      const Vec3 r = x.row(v).transpose() - poses[b].p, fv = f.row(v).transpose();
-      G += 0.5 * (fv * r.transpose() + r * fv.transpose()) - fv.dot(r) * Mat3::Identity();
+  std::vector<Mat3> M(bones_.size(), Mat3::Zero());
+  for (size_t d = 0; d < bones_.size(); ++d)
+    for (int v : bones_[d].vertices) {
+      const Vec3 xv = x.row(v).transpose(), fv = f.row(v).transpose();
+      for (int a : bones_[d].chain) M[a] += fv * (xv - poses[a].p).transpose();
     }
-    if (static_cast<Eigen::Index>(b) < k.size()) G += joint_spring::expmap_hessian(poses[b].R, k(b));
+  std::vector<int> local(bones_.size(), -1);
+  for (int root : order_) {
+    if (bones_[root].parent >= 0) continue;
+    const std::vector<int>& tree = bones_[root].below;
+    const int n = static_cast<int>(tree.size());
+    for (int i = 0; i < n; ++i) local[tree[i]] = i;
+    Eigen::MatrixXd W = Eigen::MatrixXd::Zero(3 * n, 3 * n);
+    for (int b : tree) {
+      const Mat3& Mb = M[b];
+      const double tr = Mb.trace();
+      W.block<3, 3>(3 * local[b], 3 * local[b]) += 0.5 * (Mb + Mb.transpose()) - tr * Mat3::Identity();
+      for (int a : bones_[b].chain) {
+        if (a == b) continue;
+        const Mat3 Wab = Mb.transpose() - tr * Mat3::Identity();
+        W.block<3, 3>(3 * local[a], 3 * local[b]) += Wab;
+        W.block<3, 3>(3 * local[b], 3 * local[a]) += Wab.transpose();
+      }
+      if (b >= k.size()) continue;
+      const Vec3 gw = joint_spring::expmap_gradient(poses[b].R, k(b));
+      const Mat3 Hw = joint_spring::expmap_hessian(poses[b].R, k(b));
+      const std::vector<int>& chain = bones_[b].chain;  // root first: chain[i] above chain[j] for i < j
+      for (size_t i = 0; i < chain.size(); ++i) {
+        W.block<3, 3>(3 * local[chain[i]], 3 * local[chain[i]]) += Hw;
+        for (size_t j = i + 1; j < chain.size(); ++j) {
+          const Mat3 Wij = Hw - 0.5 * cross_matrix(gw);
+          W.block<3, 3>(3 * local[chain[i]], 3 * local[chain[j]]) += Wij;
+          W.block<3, 3>(3 * local[chain[j]], 3 * local[chain[i]]) += Wij.transpose();
+        }
+      }
+    }
     if (!exact) {  // filtered Newton: clamp the rotation term's negative curvature
-      Eigen::SelfAdjointEigenSolver<Mat3> es(G);
-      G = es.eigenvectors() * es.eigenvalues().cwiseMax(0.0).asDiagonal() * es.eigenvectors().transpose();
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(W);
+      W = es.eigenvectors() * es.eigenvalues().cwiseMax(0.0).asDiagonal() * es.eigenvectors().transpose();
     }
-    if (B.kind == Kind::Hinge) Hbb(B.offset, B.offset) += B.axis.dot(G * B.axis);
-    else Hbb.block<3, 3>(B.offset, B.offset) += G;
+    for (int a : tree)
+      for (int b : tree) {
+        const auto Ua = axes(a, poses), Ub = axes(b, poses);
+        Hbb.block(bones_[a].offset, bones_[b].offset, Ua.cols(), Ub.cols()) +=
+            Ua.transpose() * W.block<3, 3>(3 * local[a], 3 * local[b]) * Ub;
+      }
   }
 }
 
-bool RigidBones::solve_schur(const Eigen::MatrixXd& S, const Eigen::VectorXd& rb, bool exact, Eigen::VectorXd& db,
-                             std::vector<NeutralMode>& neutral) const {
+bool RigidBones::solve_schur(const BonePoses& poses, const Eigen::MatrixXd& S, const Eigen::VectorXd& rb, bool exact,
+                             Eigen::VectorXd& db, std::vector<NeutralMode>& neutral) const {
   Eigen::LLT<Eigen::MatrixXd> llt(S);
   if (llt.info() == Eigen::Success &&
       llt.matrixLLT().diagonal().minCoeff() > 1e-6 * std::sqrt(S.diagonal().maxCoeff())) {
@@ -266,7 +398,7 @@ bool RigidBones::solve_schur(const Eigen::MatrixXd& S, const Eigen::VectorXd& rb
           vi.segment(bones_[best].offset, bones_[best].dofs).norm())
         best = b;
     const Bone& B = bones_[best];
-    Vec3 axis = B.kind == Kind::Hinge ? B.axis : Vec3(vi.segment<3>(B.offset).normalized());
+    Vec3 axis = B.kind == Kind::Hinge ? poses[best].axis : Vec3(vi.segment<3>(B.offset).normalized());
     if (B.kind == Kind::Free && vi.segment<3>(B.offset).norm() < vi.segment<3>(B.offset + 3).norm())
       axis = vi.segment<3>(B.offset + 3).normalized();  // free to slide, not turn
     neutral.push_back({best, axis});

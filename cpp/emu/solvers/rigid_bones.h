@@ -1,20 +1,32 @@
 #pragma once
-// FEM's movable bones: rigid bodies x_v = R_b (X_v - P_b) + p_b.
+// FEM's movable bones: rigid bodies x_v = R_b (X_v - P_b) + p_b, in trees.
 //
-// Their Newton unknowns are exponential-map increments, re-linearised every
-// iteration (R <- exp([w]_x) R): a free bone has w and a translation (6
-// unknowns), a bone on a ball joint (one point shared with a pinned vertex, a
-// fixed bone or a declared world joint) turns about it (w, 3), a hinge (two or
-// more such points on a line) about its axis (1 unknown). The bone rows border
-// the soft-vertex Newton matrix:
+// Bones form a forest: a root is held by the world (one point shared with a
+// pinned vertex, a fixed bone or a declared world joint: a ball; two or more
+// on a line: a hinge) or by nothing (free: 6 unknowns); a child turns about
+// its joint with its parent bone (ball: 3 unknowns, hinge: 1, the axis
+// carried by the parent). Reduced joint coordinates, not constraint rows: the
+// joints hold exactly at every iterate, the unknowns stay few and the bone
+// Schur complement stays definite (docs/DESIGN.md, "Chains of bones").
+//
+// The Newton unknowns are exponential-map increments about the current state,
+// re-linearised every iteration: bone b's increment turns b and everything
+// below it about b's pivot p_b, by exp(theta [u]_x) for each axis u of b (ball
+// and free: e_x, e_y, e_z; hinge: its current axis). A step applies the
+// deepest bones' increments first, so x = T_root(... T_b(X)) and
+//   dx/d(theta_u of a) = u x (x - p_a)             (a any ancestor-or-self),
+//   d2x/d(theta_u of a) d(theta_v of b) = u x (v x (x - p_b))   (a above b),
+//   the same symmetrised for a = b.
+// With forces f = dE/dx, M_b = sum over the vertices below b of f (x - p_b)^T
+// gives the rotation's second-order term U_a^T (M_b^T - tr(M_b) I) U_b for a
+// above b and U_b^T (sym(M_b) - tr(M_b) I) U_b on the diagonal; a joint spring
+// on R_b adds U_a^T (H_w - [g_w]_x / 2) U_c for a above c in b's chain (g_w,
+// H_w: its exponential-map gradient and Hessian, energy/joint_spring.h).
+// The bone rows border the soft-vertex Newton matrix:
 //   [ H_ss  H_sb ] [ds]   [-g_s]     H_sb = sum_t K_t,ac J_c,
 //   [ H_sb' H_bb ] [db] = [-g_b],    H_bb = sum_t J_a' K_t,ac J_c + rotation term,
 // solved with the factor of H_ss, one back-substitution per bone unknown and
-// the dense Schur complement S = H_bb - H_sb' H_ss^-1 H_sb. The rotation's
-// second-order term (from d2/dw2 of R(w) r) is
-//   sum_v [ (f_v r_v' + r_v f_v')/2 - (f_v . r_v) I ]   (f = dE/dx, r = x - p),
-// plus the joint springs' (energy/joint_spring.h). Joints between two movable
-// bones are not supported here.
+// the dense Schur complement S = H_bb - H_sb' H_ss^-1 H_sb.
 #include <vector>
 
 #include <Eigen/Core>
@@ -26,17 +38,19 @@
 
 namespace emu {
 
-/// One movable bone's pose: x_v = R (X_v - P) + p.
+/// One movable bone's pose: x_v = R (X_v - P) + p; a hinge's current axis.
 struct BonePose {
   Mat3 R = Mat3::Identity();
   Vec3 p = Vec3::Zero();
+  Vec3 axis = Vec3::UnitX();
 };
 using BonePoses = std::vector<BonePose>;
 
 class RigidBones {
  public:
-  /// Kinds (free, ball, hinge) from the joints' rest points; throws
-  /// std::invalid_argument for a welded bone or a joint between two movable bones.
+  /// The bone forest and each bone's kind (free, ball, hinge) from the joints'
+  /// rest points; throws std::invalid_argument for a welded bone (its joint
+  /// points not on one line) or a closed loop of joints.
   RigidBones(const Model& model, const UnknownLayout& layout);
 
   int size() const { return static_cast<int>(bones_.size()); }
@@ -45,9 +59,10 @@ class RigidBones {
   /// Soft tets with a corner on a movable bone (the only ones in the border).
   const std::vector<int>& touching_tets() const { return touching_; }
 
-  /// Per solve: hinge axes from the joints' targets, and the start poses (the
-  /// best rigid fit of `initial` (#V by 3; nullptr: rest), moved onto the
-  /// joints' targets). x: #V by 3 with the pinned rows set.
+  /// Per solve: the start poses, roots first: the best rigid fit of `initial`
+  /// (#V by 3; nullptr: rest), a root moved onto its joints' targets (a root
+  /// hinge's axis from them), a child onto its parent's joint (a child
+  /// hinge turned about its axis only). x: #V by 3 with the pinned rows set.
   BonePoses begin(const LoadCase& load, const Eigen::MatrixX3d& x, const Eigen::MatrixX3d* initial);
 
   /// Poses after the Newton increment s db (exponential map).
@@ -76,31 +91,44 @@ class RigidBones {
   void add_vertex_hessian(const BonePoses& poses, const Eigen::MatrixX3d& x, const Eigen::SparseMatrix<double>& H,
                           Eigen::MatrixXd& Hsb, Eigen::MatrixXd& Hbb) const;
 
-  /// Solves S db = rb for the bone Schur complement S. Exact: false unless S is
-  /// positive definite. Filtered: where S is singular (a turn nothing resists)
-  /// its pseudo-inverse leaves that direction alone and `neutral` records it;
-  /// false if S is indefinite beyond round-off.
-  bool solve_schur(const Eigen::MatrixXd& S, const Eigen::VectorXd& rb, bool exact, Eigen::VectorXd& db,
-                   std::vector<NeutralMode>& neutral) const;
+  /// Solves S db = rb for the bone Schur complement S at poses. Exact: false
+  /// unless S is positive definite. Filtered: where S is singular (a turn
+  /// nothing resists) its pseudo-inverse leaves that direction alone and
+  /// `neutral` records it; false if S is indefinite beyond round-off.
+  bool solve_schur(const BonePoses& poses, const Eigen::MatrixXd& S, const Eigen::VectorXd& rb, bool exact,
+                   Eigen::VectorXd& db, std::vector<NeutralMode>& neutral) const;
 
  private:
   enum class Kind { Free, Ball, Hinge };
   struct Bone {
     Kind kind = Kind::Free;
     int offset = 0, dofs = 6;
+    int parent = -1;            // the bone it hangs from (-1: a root)
     int axis_end = -1;          // hinge: the anchor that spans the axis with the pivot
     Vec3 P = Vec3::Zero();      // rest pivot
-    Vec3 axis = Vec3::UnitX();  // hinge: the current axis (set per solve)
+    Vec3 rest_axis = Vec3::UnitX();  // hinge: the axis at rest
     std::vector<int> vertices;  // non-pinned vertices placed by the bone
-    std::vector<int> anchors;   // the layout's joint points on this bone
+    std::vector<int> anchors;   // the layout's joint points with its parent (or the world)
+    std::vector<int> chain;     // its ancestors and itself, root first
+    std::vector<int> below;     // itself and its descendants
   };
-  /// 3 x dofs Jacobian of a bone vertex at current offset r = x - p.
-  Eigen::Matrix<double, 3, Eigen::Dynamic> jacobian(const Bone& B, const Vec3& r) const;
+  /// 3 x dofs(): the Jacobian of a vertex of bone b at current position x,
+  /// written into J (columns of bones outside b's chain zero).
+  void vertex_jacobian(int b, const Vec3& x, const BonePoses& poses,
+                       Eigen::Matrix<double, 3, Eigen::Dynamic>& J) const;
+  /// The turn axes of bone b at poses, as columns (ball and free: I; hinge: its axis).
+  Eigen::Matrix<double, 3, Eigen::Dynamic> axes(int b, const BonePoses& poses) const;
+  void build_forest();
+  void set_kind(int b);
+  /// Adds the rotation's second-order term and the joint springs' Hessian to Hbb.
+  void add_rotation_term(const BonePoses& poses, const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& f, bool exact,
+                         Eigen::MatrixXd& Hbb) const;
 
   const Model& model_;
   const UnknownLayout& layout_;
   double diag_;
   std::vector<Bone> bones_;
+  std::vector<int> order_;      // roots first, then each bone after its parent
   int dofs_ = 0;
   std::vector<int> touching_;
 };
