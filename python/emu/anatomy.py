@@ -11,6 +11,10 @@ meshed by `emu.author` (fTetWild) and cached after the first build.
                       (straightens it); the knee bent 15 degrees at rest
     neck(resolution)  torso (fixed) and head on a ball joint, four muscles
                       (left_back, right_back, left_front, right_front)
+    upper_limb(resolution)  the arm on a shoulder: scapula (fixed), humerus on
+                      the shoulder's ball joint (a passive spring), forearm on
+                      the elbow hinge; biceps and triceps span both joints,
+                      the deltoid the shoulder (a chain of two movable bones)
 
 Sizes are in metres (an adult's arm at about half scale, as the box arm).
 ``resolution`` sets the surfaces' tessellation, the mesher's envelope and a
@@ -35,10 +39,12 @@ from .author import JointSpec, PartSpec, PartsFile, author
 from .scene import Scene
 from .shapes import capsule, spindle
 
-__all__ = ["arm", "leg", "neck", "cache_dir", "ANATOMY_TETS"]
+__all__ = ["arm", "leg", "neck", "upper_limb", "cache_dir", "ANATOMY_TETS", "SHOULDER_STIFFNESS"]
 
 # Tets per resolution^2 (fTetWild's count for a target is within about 30%).
 ANATOMY_TETS = 700
+# upper_limb: the shoulder's passive stiffness (N m / rad)
+SHOULDER_STIFFNESS = 0.05
 # Bump when a shape changes: the cache key holds it.
 _VERSION = 1
 # The meshes that ship with the package (_rebuild_shipped() remeshes them).
@@ -81,6 +87,29 @@ def _arm_parts(rings: int) -> tuple:
     return parts, joints
 
 
+def _upper_limb_parts(rings: int) -> tuple:
+    ring = dict(rings=rings, segments=rings)
+    # the arm's layout (humerus up +y, forearm along +x, elbow hinge about +z at
+    # the origin) with a scapula across the humerus' top: the shoulder a ball
+    # joint between them. The biceps (in front, +x) and the triceps (behind)
+    # run from the scapula to the forearm clear of the humerus, spanning both
+    # joints; the deltoid runs from the scapula's side (+z) to the humerus.
+    parts = [
+        PartSpec("scapula", capsule([-0.03, 0.152, 0], [0.03, 0.152, 0], 0.009, **ring), "bone"),
+        PartSpec("humerus", capsule([0, 0.016, 0], [0, 0.132, 0], 0.008, **ring), "bone", fixed=False),
+        PartSpec("forearm", capsule([-0.024, 0, 0], [0.125, 0, 0], 0.007, **ring), "bone", fixed=False),
+        PartSpec("biceps", spindle([0.014, 0.146, 0], [0.04, 0.002, 0], 0.009, end_radius=0.003, **ring),
+                 "muscle"),
+        PartSpec("triceps", spindle([-0.016, 0.146, 0], [-0.02, 0.0, 0], 0.008, end_radius=0.003, **ring),
+                 "muscle"),
+        PartSpec("deltoid", spindle([0.0, 0.152, 0.012], [0.0, 0.09, 0.005], 0.007, end_radius=0.003, **ring),
+                 "muscle"),
+    ]
+    joints = [JointSpec(("scapula", "humerus"), np.array([0.0, 0.1375, 0.0]), None),
+              JointSpec(("humerus", "forearm"), np.array([0.0, 0.0115, 0.0]), np.array([0.0, 0.0, 1.0]))]
+    return parts, joints
+
+
 def _leg_parts(rings: int) -> tuple:
     ring = dict(rings=rings, segments=rings)
     # z up, the knee bent 15 degrees at rest: the tibia runs down and back (-y);
@@ -114,7 +143,7 @@ def _neck_parts(rings: int) -> tuple:
     return parts, joints
 
 
-_SHAPES = {"arm": _arm_parts, "leg": _leg_parts, "neck": _neck_parts}
+_SHAPES = {"arm": _arm_parts, "leg": _leg_parts, "neck": _neck_parts, "upper_limb": _upper_limb_parts}
 
 
 def _key(name: str, resolution: int, parts, joints) -> str:
@@ -158,14 +187,15 @@ def _build(name: str, resolution: int, progress=None) -> dict:
     return data
 
 
-def _scene(name: str, resolution: int, *, fixed_bones=(), muscle_youngs: float = 6e4,
+def _scene(name: str, resolution: int, *, fixed_bones=(), joint_stiffness=None, muscle_youngs: float = 6e4,
            max_activation: float = 1e5, progress=None) -> Scene:
     d = _build(name, resolution, progress)
     s = Scene(d["points"], d["tets"])
     for k, (n, kind) in enumerate(zip(d["names"].tolist(), d["kinds"].tolist())):
         idx = np.flatnonzero(d["part"] == k)
         if kind == "bone":
-            s.add_bone(n, idx, fixed=bool(d["fixed"][k]) or n in fixed_bones)
+            s.add_bone(n, idx, fixed=bool(d["fixed"][k]) or n in fixed_bones,
+                       joint_stiffness=(joint_stiffness or {}).get(n, 0.0))
         elif kind == "tendon":
             s.add_tendon(n, idx)
         else:
@@ -184,6 +214,16 @@ def arm(resolution: int = 3, *, forearm_fixed: bool = False, muscle_youngs: floa
                   muscle_youngs=muscle_youngs, max_activation=max_activation, progress=progress)
 
 
+def upper_limb(resolution: int = 3, *, shoulder_stiffness: float = SHOULDER_STIFFNESS, muscle_youngs: float = 6e4,
+               max_activation: float = 1e5, progress=None) -> Scene:
+    """The arm on a shoulder (module docstring): a chain of two movable bones.
+    shoulder_stiffness (N m / rad) is the humerus' passive spring about the
+    shoulder (a real shoulder's capsule and ligaments): with it, the muscles
+    and not pins hold the humerus, and every activation has one equilibrium."""
+    return _scene("upper_limb", resolution, joint_stiffness={"humerus": shoulder_stiffness},
+                  muscle_youngs=muscle_youngs, max_activation=max_activation, progress=progress)
+
+
 def leg(resolution: int = 3, *, muscle_youngs: float = 6e4, max_activation: float = 1e5, progress=None) -> Scene:
     """The smooth leg (module docstring): the hamstring flexes the knee, the quadriceps straightens it."""
     return _scene("leg", resolution, muscle_youngs=muscle_youngs, max_activation=max_activation, progress=progress)
@@ -194,16 +234,19 @@ def neck(resolution: int = 3, *, muscle_youngs: float = 6e4, max_activation: flo
     return _scene("neck", resolution, muscle_youngs=muscle_youngs, max_activation=max_activation, progress=progress)
 
 
-def _rebuild_shipped() -> None:
-    """Mesh the shipped resolutions afresh into SHIPPED_DIR (after a shape changed)."""
+def _rebuild_shipped(names=None) -> None:
+    """Mesh the shipped resolutions of the scenes ``names`` (default: all)
+    afresh into SHIPPED_DIR, after a shape changed or a scene was added."""
     import glob
     import tempfile
-    for old in glob.glob(os.path.join(SHIPPED_DIR, "*.npz")):
-        os.remove(old)
+    names = tuple(_SHAPES) if names is None else tuple(names)
+    for name in names:
+        for old in glob.glob(os.path.join(SHIPPED_DIR, f"{name}_r*.npz")):
+            os.remove(old)
     os.makedirs(SHIPPED_DIR, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         os.environ["EMU_CACHE_DIR"] = tmp
-        for name in _SHAPES:
+        for name in names:
             for r in SHIPPED_RESOLUTIONS:
                 _build(name, r, progress=print)
         for f in sorted(os.listdir(os.path.join(tmp, "anatomy"))):

@@ -5,7 +5,7 @@
     gravity = [0.0, 0.0, 0.0]
 
     [mesh]                       # exactly one of: path | dataset | [mesh.fusiform] | [mesh.arm] | [mesh.neck]
-                                 # | [mesh.leg] | [mesh.elbow_wrap]
+                                 # | [mesh.leg] | [mesh.upper_limb] | [mesh.elbow_wrap]
     path = "muscle.vtu"          # a labelled mesh file, relative to the scene file
     dataset = "big_muscle"       # or one of the authors' research scenes (simple_joint, big_muscle,
                                  # realistic_biceps), downloaded on first use (emu.datasets, `emu data`)
@@ -21,6 +21,10 @@
     resolution = 2               # muscles "left_back", "right_back", "left_front", "right_front"
     [mesh.leg]                   # femur (fixed) and tibia (moved) on the knee hinge, bent 15 degrees;
     resolution = 2               # muscles "hamstring" (flexes the knee) and "quadriceps"
+    [mesh.upper_limb]            # the arm on a shoulder: "scapula" (fixed), "humerus" on the shoulder's
+    resolution = 2               # ball joint, "forearm" on the elbow hinge (a chain of two moved bones);
+    shoulder_stiffness = 0.05    # muscles "biceps", "triceps" (both joints), "deltoid"; the humerus'
+                                 # passive spring (N m / rad)
     [mesh.fusiform]              # the procedural muscle (emu.scenes.fusiform): parts "belly"
     tets = 5000                  # and "tendons", pin sets "proximal" and "distal"
     length = 10.0
@@ -118,12 +122,15 @@ class SceneFileError(ValueError):
     """A scene file that does not follow the schema (the message names the key)."""
 
 
+# the built-in scenes a [mesh.NAME] table names
+_BUILT_IN = ("arm", "neck", "leg", "upper_limb", "elbow_wrap")
+
 _SCHEMA = {
     "mesh": {"path": str, "dataset": str, "fibers": str, "weld": bool, "fusiform": {"tets": int, "resolution": int, "length": float,
                                                      "radius": float, "end_radius": float,
                                                      "tendon_fraction": float},
              "arm": {"resolution": int}, "neck": {"resolution": int}, "leg": {"resolution": int},
-             "elbow_wrap": {"resolution": int}},
+             "upper_limb": {"resolution": int, "shoulder_stiffness": float}, "elbow_wrap": {"resolution": int}},
     "materials": "table of tables",
     "parts": "table of tables",
     "pins": list,
@@ -147,7 +154,7 @@ _BONE_KEYS = {"fixed": bool, "acap_weight": float, "joint_stiffness": float, "ax
 _JOINT_KEYS = {"bones": list, "centre": list, "axis": list}
 _PART_KEYS = {"kind": str, "fibers": (str, list)}
 _MATERIAL_KEYS = {"youngs": float, "poisson": float, "density": float, "max_activation": float,
-                  "acap_weight": float}
+                  "acap_weight": float, "joint_stiffness": float}
 _CURVE_KEYS = {"keys": list, "per_frame": list, "interpolation": str, "normalized": bool}
 
 
@@ -237,9 +244,9 @@ def load_scene_file(path) -> SceneSpec:
     mesh = data.get("mesh")
     if mesh is None:
         raise SceneFileError("missing [mesh] table (mesh.path, mesh.dataset or [mesh.fusiform])")
-    if sum(k in mesh for k in ("path", "dataset", "fusiform", "arm", "neck", "leg", "elbow_wrap")) != 1:
+    if sum(k in mesh for k in ("path", "dataset", "fusiform") + _BUILT_IN) != 1:
         raise SceneFileError("[mesh] needs exactly one of 'path', 'dataset', [mesh.fusiform], [mesh.arm], "
-                             "[mesh.neck], [mesh.leg] or [mesh.elbow_wrap]")
+                             "[mesh.neck], [mesh.leg], [mesh.upper_limb] or [mesh.elbow_wrap]")
     for key in ("fibers", "weld"):
         if key in mesh and not ("path" in mesh or "dataset" in mesh):
             raise SceneFileError(f"mesh.{key} applies to mesh.path or mesh.dataset only")
@@ -270,12 +277,16 @@ def load_scene_file(path) -> SceneSpec:
             raise SceneFileError(f"mesh.path {mesh.get('path') or mesh.get('dataset')}: {e}") from None
     elif "parts" in data:
         raise SceneFileError("[parts.<name>] (kind, fibers) applies to mesh.path or mesh.dataset only")
-    elif "arm" in mesh or "neck" in mesh or "leg" in mesh or "elbow_wrap" in mesh:
-        kind = next(k for k in ("arm", "neck", "leg", "elbow_wrap") if k in mesh)
-        res = int(mesh[kind].get("resolution", 2))
+    elif any(k in mesh for k in _BUILT_IN):
+        kind = next(k for k in _BUILT_IN if k in mesh)
+        options = dict(mesh[kind])
+        res = int(options.pop("resolution", 2))
         if res < 1:
             raise SceneFileError(f"mesh.{kind}.resolution must be >= 1, got {res}")
-        scene = {"arm": anatomy.arm, "neck": anatomy.neck, "leg": anatomy.leg, "elbow_wrap": elbow_wrap}[kind](res)
+        if options.get("shoulder_stiffness", 0.0) < 0:
+            raise SceneFileError(f"mesh.{kind}.shoulder_stiffness must be >= 0, got {options['shoulder_stiffness']}")
+        scene = {"arm": anatomy.arm, "neck": anatomy.neck, "leg": anatomy.leg, "upper_limb": anatomy.upper_limb,
+                 "elbow_wrap": elbow_wrap}[kind](res, **options)
     else:
         scene = fusiform(**mesh["fusiform"], pins=())
     named_pins = scene.vertex_sets
