@@ -1,4 +1,6 @@
 """Mesh input/output through emu.io (meshio underneath)."""
+import warnings
+
 import numpy as np
 import pytest
 
@@ -272,6 +274,60 @@ def test_scene_file_and_cli_set_kinds_and_fibres(tmp_path, mesh, capsys):
     assert main(["info", str(path), "--kind", "part1=bone", "part2=bone", "--fibers", "part0=laplace"]) == 0
     out = capsys.readouterr().out
     assert "part part1: bone" in out and "attachments: part1" in out
+
+
+def _box(lo, hi, n):
+    """A structured tet mesh of the box [lo, hi] (3,), n cells per side, six
+    tets per cell: (points, tets)."""
+    g = np.stack(np.meshgrid(*[np.linspace(a, b, n + 1) for a, b in zip(lo, hi)], indexing="ij"), -1).reshape(-1, 3)
+    vid = np.arange((n + 1) ** 3).reshape(n + 1, n + 1, n + 1)
+    tets = []
+    for i, j, k in np.ndindex(n, n, n):
+        c = [vid[i + a, j + b, k + d] for a, b, d in [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0),
+                                                      (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]]
+        for a, b in [(1, 2), (2, 3), (3, 7), (7, 4), (4, 5), (5, 1)]:
+            tets.append([c[0], c[a], c[b], c[6]])
+    return g, np.asarray(tets)
+
+
+@pytest.mark.parametrize("case", ["loose", "conforming", "apart"])
+def test_a_muscle_lying_on_a_bone_without_sharing_vertices_is_named(tmp_path, case, capsys):
+    """A muscle block meshed with the bone it hangs from (shared vertices) and
+    apart from the bone below it (4 cells per side against 3: its vertices lie
+    on the bone's top face, none shared but the corners): the loose contact
+    is named with its area, the unit face; meshed with both bones, or lifted
+    a tenth of an edge off the bone, nothing is named."""
+    lift = 0.1 / 4 if case == "apart" else 0.0
+    muscle_points, muscle_tets = _box([0, 0, lift], [1, 1, 3 + lift], 4)   # muscle z < 2, top bone z > 2
+    top = muscle_points[muscle_tets].mean(axis=1)[:, 2] > 2 + lift
+    if case == "conforming":
+        points, tets = _box([0, 0, -1], [1, 1, 3], 4)
+        z = points[tets].mean(axis=1)[:, 2]
+        part = np.where(z < 0, 1, np.where(z > 2, 2, 0))
+    else:
+        bone_points, bone_tets = _box([0, 0, -1], [1, 1, 0], 3)
+        points = np.vstack([muscle_points, bone_points])
+        tets = np.vstack([muscle_tets, bone_tets + len(muscle_points)])
+        part = np.concatenate([np.where(top, 2, 0), np.ones(len(bone_tets), int)])
+    path = tmp_path / "blocks.vtu"
+    emu.io.write(path, points, tets, cell_data={"part": part})
+    kinds = {"part1": "bone", "part2": "bone"}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = emu.io.load_scene(path, kinds=kinds, fibers={"part0": [0, 0, 1.0]})
+    said = [str(w.message) for w in caught if "lies on bone" in str(w.message)]
+    assert "part2" in scene.attachments("part0")
+    if case == "loose":
+        assert "part1" not in scene.attachments("part0")
+        [(soft, bone, faces, area)] = scene.loose_contacts()
+        assert (soft, bone) == ("part0", "part1") and faces == 2 * 4 * 4
+        assert area == pytest.approx(1.0, rel=1e-12)
+        assert len(said) == 1 and "muscle 'part0' lies on bone 'part1' over an area of 1 " in said[0]
+        from emu.app.cli import main
+        assert main(["info", str(path), "--kind", "part1=bone", "part2=bone", "--fibers", "part0=0,0,1"]) == 0
+        assert "loose: part0 lies on part1 over 32 surface triangle(s), area 1," in capsys.readouterr().out
+    else:
+        assert scene.loose_contacts() == [] and said == []
 
 
 def test_cracks_are_named_and_welded(tmp_path, mesh):

@@ -4,6 +4,7 @@
 #include "bind.h"
 #include "emu/mesh/connected_components.h"
 #include "emu/mesh/harmonic_field.h"
+#include "emu/mesh/near_surface.h"
 #include "emu/mesh/spatial_order.h"
 #include "emu/mesh/tet_geometry.h"
 
@@ -28,6 +29,20 @@ void bind_mesh(py::module_& m) {
         "P1 Laplace solve on tets T with values fixed at vertex ids -> #V field");
   m.def("connected_components", &connected_components, py::arg("num_vertices"), py::arg("T"),
         "#V, T  #T by 4 indices -> #V labels: the smallest vertex id of each vertex's piece");
+  m.def(
+      "near_surface",
+      [](const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& Q, double max_distance) {
+        Eigen::VectorXd distance;
+        Eigen::VectorXi nearest;
+        {
+          py::gil_scoped_release release;
+          near_surface(V, F, Q, max_distance, distance, nearest);
+        }
+        return py::make_tuple(distance, nearest);
+      },
+      py::arg("V"), py::arg("F"), py::arg("Q"), py::arg("max_distance"),
+      "V  #V by 3, F  #F by 3 triangles, Q  #Q by 3 queries -> (#Q distances to the nearest triangle, "
+      "+inf beyond max_distance; #Q triangle ids, -1 where none)");
   m.def("spatial_order", &spatial_order, py::arg("X"), py::arg("T"),
         "X  #V by 3, T  #T by 4 indices -> #T tet ids along a Z-order curve through the centroids "
         "(equal codes in T's order)");

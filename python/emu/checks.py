@@ -14,15 +14,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .geometry import bbox_diagonal
+from .geometry import bbox_diagonal, boundary_faces
 
 __all__ = ["MeshReport", "check_mesh", "tet_quality", "signed_volumes", "connected_components",
            "check_anchored", "check_movable_bones", "integer_ids", "inverted_tets", "coincident_vertices",
-           "weld_coincident"]
+           "weld_coincident", "loose_contacts"]
 
 SLIVER_QUALITY = 0.05
 # Vertices closer than this x the bounding-box diagonal are one point (coincident_vertices).
 COINCIDENT_TOL = 1e-9
+# A soft part's surface lies on a bone where its vertices are within this x the
+# median surface edge of the bone's surface (loose_contacts): separately meshed
+# surfaces that touch differ by the chord sagitta, about h^2 / 8R << 0.05 h.
+LOOSE_GAP = 0.05
 
 
 def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
@@ -256,3 +260,51 @@ def check_movable_bones(points: np.ndarray, bones: dict, held: np.ndarray):
             raise ValueError(f"movable bone '{name}' shares {len(on)} non-collinear vertices with pinned "
                              "vertices or fixed bones, so it cannot move (a weld); make it fixed=True, or "
                              "let it share one vertex (ball joint) or two (hinge)")
+
+
+def loose_contacts(points: np.ndarray, tets: np.ndarray, soft: dict, bones: dict, *, shared_ok=(),
+                   gap: float = LOOSE_GAP) -> list:
+    """Where a soft part lies on a bone without sharing vertices with it: a
+    muscle meshed apart from its bone (or non-conforming at the interface)
+    touches it there but nothing attaches it.
+
+    points     (n, 3) rest positions;  tets  (m, 4) vertex ids
+    soft       {name: tet ids} muscles and tendons
+    bones      {name: tet ids}
+    shared_ok  vertex ids to count as shared (a crack's coincident vertices,
+               reported on their own)
+    gap        a vertex touches a surface within gap x its median edge length
+    Returns [(soft name, bone name, faces, area)] for each pair where the soft
+    part's surface triangles with all three vertices on the bone's surface
+    (shared with it or within the gap) and not all shared cover more than two
+    of its median triangles (less is a grazing triangle beside an attachment):
+    their number and area.
+    """
+    points = np.asarray(points, np.float64)
+    out = []
+    ok = np.zeros(len(points), bool)
+    ok[np.asarray(shared_ok, np.int64).ravel()] = True
+    for bone, bone_tets in bones.items():
+        bf = boundary_faces(tets[bone_tets])
+        if len(bf) == 0:
+            continue
+        edges = np.linalg.norm(points[bf] - points[np.roll(bf, 1, axis=1)], axis=2)
+        tol = gap * float(np.median(edges))
+        on_bone = np.zeros(len(points), bool)
+        on_bone[np.unique(tets[bone_tets])] = True
+        for name, soft_tets in soft.items():
+            sf = boundary_faces(tets[soft_tets])
+            verts = np.unique(sf)
+            query = verts[~on_bone[verts] & ~ok[verts]]
+            if len(query) == 0:
+                continue
+            dist, _ = _core.near_surface(points, bf.astype(np.int32), points[query], tol)
+            near = np.zeros(len(points), bool)
+            near[query[np.isfinite(dist)]] = True
+            loose = np.all(near[sf] | on_bone[sf] | ok[sf], axis=1) & np.any(near[sf], axis=1)
+            if loose.any():
+                p = points[sf]
+                areas = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+                if areas[loose].sum() > 2.0 * np.median(areas):
+                    out.append((name, bone, int(loose.sum()), float(areas[loose].sum())))
+    return out

@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 
-from .checks import check_anchored, check_mesh, check_movable_bones, integer_ids
+from .checks import check_anchored, check_mesh, check_movable_bones, integer_ids, loose_contacts
 from .contact import ContactSettings, check_pairs
 from .fibers import attachment_fibers, attachments, laplace_fibers
 from .geometry import tet_vertices
@@ -184,6 +184,18 @@ class Scene:
                 key = (min(x, y), max(x, y))
                 out[key] = out.get(key, 0) + 1
         return [(names[x], names[y], n) for (x, y), n in sorted(out.items())]
+
+    def loose_contacts(self) -> list:
+        """[(muscle or tendon, bone, triangles, area)]: where a soft part's surface
+        lies on a bone's surface without sharing vertices with it (meshed apart,
+        or non-conforming at the interface), so nothing attaches it there; a
+        crack's coincident vertices are left to cracks(). Mesh the parts as one
+        (emu mesh) where it should be attached; turn contact on where it slides."""
+        soft = {p.name: p.tets for p in self.parts.values() if p.kind in ("muscle", "tendon")}
+        bones = self._bones()
+        if not soft or not bones:
+            return []
+        return loose_contacts(self.points, self.tets, soft, bones, shared_ok=self.mesh_report.coincident)
 
     def joints(self) -> list:
         """Joints (emu.joints.Joint) between bones: detected from vertices shared

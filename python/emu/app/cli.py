@@ -59,6 +59,10 @@ def _print_info(args):
             print("  " + line)
         for a, b, n in scene.cracks():
             print(f"  crack: {a} and {b} touch at {n} vertex pair(s) they do not share (--weld joins them)")
+        for soft, bone, n, area in scene.loose_contacts():
+            print(f"  loose: {soft} lies on {bone} over {n} surface triangle(s), area {area:.3g}, sharing no "
+                  "vertex there (not attached there: mesh the parts as one with emu mesh, or turn contact on "
+                  "if it slides)")
         for p in scene.parts.values():
             print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}")
             if p.kind == "muscle":

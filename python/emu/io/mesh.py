@@ -174,6 +174,11 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_
                           "vertex pair(s) they do not share: nothing joins them there (a muscle is not attached "
                           "there); load with weld=True (--weld, [mesh] weld = true) to join them",
                           MeshWarning, stacklevel=2)
+        for soft, bone, _, area in scene.loose_contacts():
+            warnings.warn(f"{path}: {scene.parts[soft].kind} '{soft}' lies on bone '{bone}' over an area of "
+                          f"{area:.3g} without sharing vertices with it: nothing attaches it there. Mesh the "
+                          "parts as one (emu mesh) if it is attached there; turn contact on if it slides there",
+                          MeshWarning, stacklevel=2)
     return scene
 
 
