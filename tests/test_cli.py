@@ -32,6 +32,17 @@ def test_emu_run_end_to_end(tmp_path):
     assert all((out / f).exists() and (out / f.replace(".vtu", ".obj")).exists() for f in files)
     log = json.loads((out / "log.json").read_text())
     assert len(log["frames"]) == 3 and all(f["converged"] for f in log["frames"])
+    assert (out / "preview.png").stat().st_size > 10_000 and "preview.png" in r.stdout
+    # a rerun with fewer frames into the same folder removes the first run's
+    # files (its frame 2, its preview) and nothing else
+    (out / "notes.txt").write_text("mine")
+    short = write(tmp_path, GOOD.replace("count = 3", "count = 2"), name="short.toml")
+    assert "count = 3" in GOOD
+    r = emu_cli("run", str(short), "--out", str(out), "--no-preview")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "removed 9 file(s) an earlier run wrote" in r.stdout, r.stdout
+    assert sorted(p.name for p in out.iterdir()) == ["frame_0000.obj", "frame_0000.vtu", "frame_0001.obj",
+                                                      "frame_0001.vtu", "log.json", "notes.txt", "series.pvd"]
 
 
 def test_emu_run_reports_a_missing_scene_file(tmp_path):
@@ -76,6 +87,7 @@ def test_emu_solve_a_labelled_mesh(tmp_path):
     r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--method", "fem", "--out", str(out))
     assert r.returncode == 0, r.stdout + r.stderr
     sol = meshio.read(out)
+    assert (tmp_path / "sol.png").stat().st_size > 5_000 and "wrote " + str(tmp_path / "sol.png") in r.stdout
     act = np.asarray(sol.cell_data["activation"][0]).ravel()
     np.testing.assert_allclose(act[s.parts["belly"].tets], 1e4)
     np.testing.assert_array_equal(act[s.parts["proximal"].tets], 0.0)

@@ -231,6 +231,15 @@ def _solve(args):
     if args.out:
         write_solution(args.out, scene, sol, activation=act, fibers=solver.fibers)
         print(f"wrote {args.out}")
+        if not args.no_preview:
+            from ..io.plots import contact_sheet, default_view
+
+            picture = os.path.splitext(args.out)[0] + ".png"
+            rest_act = {m: 0.0 for m in scene.muscles}
+            solved_act = {m: a / scene.parts[m].max_activation for m, a in act.items() if m in scene.parts}
+            contact_sheet(picture, scene, [scene.points, sol.positions], titles=["rest", "solved"],
+                          activations=[rest_act, solved_act], view=default_view(scene))
+            print(f"wrote {picture} (rest and solved; --no-preview skips it)")
     return 0 if sol.converged else 1
 
 
@@ -240,9 +249,13 @@ def _run(args):
         spec.solver["threads"] = args.threads
     if args.accuracy is not None:
         spec.solver["accuracy"] = args.accuracy
+    if args.no_preview:
+        spec.output["preview"] = False
     log = run_scene(spec, args.out)
-    print(f"wrote {args.out or spec.output['dir']}: frame_*.vtu + series.pvd (ParaView), frame_*.obj (Blender), "
-          "log.json")
+    wrote = [w for w, on in (("frame_*.vtu + series.pvd (ParaView)", spec.output.get("vtu", True)),
+                             ("frame_*.obj (Blender)", spec.output.get("obj", True)), ("log.json", True),
+                             ("preview.png", spec.output["preview"] and log["frames"])) if on]
+    print(f"wrote {args.out or spec.output['dir']}: {', '.join(wrote)}")
     if log["interrupted"]:
         return 130
     return 0 if all(f["converged"] for f in log["frames"]) else 1
@@ -323,7 +336,8 @@ def main(argv=None):
                    help="vertex error to FEM wanted (0.01: 1%% of the diagonal): picks alpha, stops when steps no "
                         "longer matter")
     s.add_argument("--threads", type=int, default=None)
-    s.add_argument("--out", default=None, help="write the result here (.vtu)")
+    s.add_argument("--out", default=None, help="write the result here (.vtu) and a preview picture beside it (.png)")
+    s.add_argument("--no-preview", action="store_true", help="with --out: do not write the preview picture")
     s.set_defaults(func=_solve)
     r = sub.add_parser("run", help="run a scene file (TOML/JSON) over its frames")
     r.add_argument("scene")
@@ -331,6 +345,7 @@ def main(argv=None):
     r.add_argument("--threads", type=int, default=None)
     r.add_argument("--accuracy", type=float, default=None,
                    help="override the scene file's solver.accuracy (vertex error to FEM wanted, e.g. 0.01)")
+    r.add_argument("--no-preview", action="store_true", help="do not write preview.png (output.preview = false)")
     r.set_defaults(func=_run)
     w = sub.add_parser("sweep", help="run many cases of a scene file (a grid or list of scene-file keys) on "
                                      "Dask: a local cluster or a scheduler; results.csv, one folder per case")

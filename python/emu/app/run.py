@@ -1,24 +1,63 @@
 """Running a scene over its frames: warm-started solves, per-frame files, a log.
 
 Outputs in the folder: frame_NNNN.vtu per frame and series.pvd (ParaView),
-frame_NNNN.obj surfaces (Blender), log.json (per-frame solver statistics).
-Ctrl-C stops after keeping every finished frame (and the series and log).
+frame_NNNN.obj surfaces (Blender), log.json (per-frame solver statistics),
+preview.png (up to eight frames, shaded, per-part colours). A run first
+removes what an earlier run wrote there (those names only). Ctrl-C stops after
+keeping every finished frame (and the series, log and preview).
 """
 from __future__ import annotations
 
+import glob
 import json
 import os
+import re
 import time
+
+import numpy as np
 
 from ..advice import method_hint
 from ..bones import bone_angle
 from ..io.obj import boundary_faces, write_obj
+from ..io.plots import contact_sheet, default_view
 from ..io.vtk import write_pvd, write_solution
 from ..runtime import info as runtime_info
 from ..solve import Solver
 from .scenefile import SceneSpec
 
-__all__ = ["run_scene"]
+__all__ = ["run_scene", "clear_run", "RUN_OUTPUTS"]
+
+# What a run writes into its folder (and a rerun removes first).
+RUN_OUTPUTS = re.compile(r"frame_\d{4,}\.(vtu|obj)|series\.pvd|log\.json|preview\.png")
+PREVIEW_FRAMES = 8
+
+
+def clear_run(out_dir: str) -> int:
+    """Remove the files an earlier run wrote into out_dir (RUN_OUTPUTS names
+    only; anything else stays). Returns how many were removed."""
+    removed = 0
+    for path in glob.glob(os.path.join(out_dir, "*")):
+        if os.path.isfile(path) and RUN_OUTPUTS.fullmatch(os.path.basename(path)):
+            os.remove(path)
+            removed += 1
+    return removed
+
+
+def _preview(path, spec: SceneSpec, kept: dict, log: dict) -> None:
+    """preview.png: the kept frames side by side, looking along the first
+    hinge (or the mesh's thinnest side), muscles coloured by activation."""
+    scene = spec.scene
+    frames = sorted(kept)
+    entries = [log["frames"][k] for k in frames]
+    acts = [{m: a / scene.parts[m].max_activation for m, a in e["activation"].items() if m in scene.parts}
+            for e in entries]
+    titles = []
+    for e in entries:
+        angles = e["bone_angles_deg"]
+        turn = "" if not angles else "\n" + ", ".join(f"{b} {a:+.0f}\u00b0" for b, a in list(angles.items())[:2])
+        titles.append(f"frame {e['frame']}, t = {e['time']:.2f} s{turn}")
+    contact_sheet(path, scene, [kept[k] for k in frames], titles=titles, activations=acts,
+                  view=spec.output.get("view") or default_view(scene), columns=4)
 
 
 def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_frame=None) -> dict:
@@ -26,6 +65,9 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
     on_frame(k, solution) is called after each frame (e.g. to keep positions)."""
     out = out_dir or spec.output["dir"]
     os.makedirs(out, exist_ok=True)
+    cleared = clear_run(out)
+    if cleared:
+        progress(f"removed {cleared} file(s) an earlier run wrote in {out}")
     solver = Solver(spec.scene, **spec.solver)
     faces = boundary_faces(spec.scene.tets) if spec.output.get("obj", True) else None
     info = runtime_info()
@@ -33,6 +75,9 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
            "threads": info["omp_threads"], "setup_s": solver.setup_time_s, "frames": [], "interrupted": False}
     pvd = []
     prev = None
+    want_preview = spec.output.get("preview", True)
+    picks = set(np.linspace(0, spec.frames - 1, min(PREVIEW_FRAMES, spec.frames)).round().astype(int).tolist())
+    kept = {}
     t_start = time.perf_counter()
     progress(f"{spec.scene}; {spec.frames} frame(s), {solver.method} (setup {solver.setup_time_s:.2f} s)")
     hint = method_hint(spec.scene, solver.method, sequence=spec.frames > 1)
@@ -65,6 +110,8 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                                   "error_estimate_s": sol.error_estimate_time_s,
                                   "accuracy_reached": sol.accuracy_reached, "fem_corrected": sol.corrected,
                                   "inverted_tets": sol.inverted_tets, "contact": sol.contact})
+            if want_preview and k in picks:
+                kept[k] = sol.positions.copy()
             if on_frame is not None:
                 on_frame(k, sol)
             elapsed = time.perf_counter() - t_start
@@ -90,4 +137,9 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
             write_pvd(os.path.join(out, "series.pvd"), pvd)
         with open(os.path.join(out, "log.json"), "w") as f:
             json.dump(log, f, indent=2, default=float)
+        if want_preview and log["frames"]:
+            last = len(log["frames"]) - 1
+            if last not in kept and prev is not None:   # interrupted: show where it stopped
+                kept[last] = prev.positions.copy()
+            _preview(os.path.join(out, "preview.png"), spec, kept, log)
     return log

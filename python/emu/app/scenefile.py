@@ -95,6 +95,9 @@
     dir = "emu_run"              # `emu run --out` overrides it
     vtu = true                   # a VTU per frame and a .pvd series (ParaView)
     obj = true                   # an OBJ surface per frame (Blender)
+    preview = true               # preview.png: up to eight frames, shaded, per-part colours
+    view = "yz"                  # the preview's right and up axes (default: looking along the first
+                                 # hinge, else along the mesh's thinnest side)
 
 Centre is spelled ``centre`` everywhere (a ``center`` key is an error that says so).
 """
@@ -147,7 +150,7 @@ _SCHEMA = {
     "activation": "table of tables",
     "bones": "table of tables",
     "joints": "table of tables",
-    "output": {"dir": str, "vtu": bool, "obj": bool},
+    "output": {"dir": str, "vtu": bool, "obj": bool, "preview": bool, "view": str},
 }
 _BONE_KEYS = {"fixed": bool, "acap_weight": float, "joint_stiffness": float, "axis": list, "centre": list,
               "angle": list, "interpolation": str}
@@ -166,7 +169,8 @@ class SceneSpec:
     dt: float
     curves: dict                          # muscle name -> Curve
     bones: dict = field(default_factory=dict)  # scripted bone -> (axis (3,), centre (3,), angle Curve)
-    output: dict = field(default_factory=lambda: {"dir": "emu_run", "vtu": True, "obj": True})
+    output: dict = field(default_factory=lambda: {"dir": "emu_run", "vtu": True, "obj": True, "preview": True,
+                                                  "view": None})
     source: str = ""
 
     def bone_poses(self, frame: int) -> dict:
@@ -398,7 +402,13 @@ def load_scene_file(path) -> SceneSpec:
             scene.add_joint(b[0], b[1], spec["centre"], spec.get("axis"))
         except ValueError as e:
             raise SceneFileError(f"joints.{name}: {e}") from None
-    output = {"dir": "emu_run", "vtu": True, "obj": True}
+    output = {"dir": "emu_run", "vtu": True, "obj": True, "preview": True, "view": None}
     output.update(data.get("output", {}))
+    if output["view"] is not None:
+        v = output["view"]
+        if len(v) != 2 or v[0] == v[1] or not set(v) <= set("xyz"):
+            raise SceneFileError(f"output.view must be two different axes of x, y, z (right then up, e.g. "
+                                 f"\"yz\"), got {v!r}")
+        output["view"] = tuple("xyz".index(c) for c in v)
     return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, bones=bones, output=output,
                      source=path)

@@ -9,7 +9,7 @@ import numpy as np
 
 from .obj import boundary_faces
 
-__all__ = ["contact_sheet", "angle_activation_plot"]
+__all__ = ["contact_sheet", "angle_activation_plot", "default_view"]
 
 PART_COLOURS = {"bone": (0.93, 0.90, 0.80), "tendon": (0.85, 0.85, 0.95), "muscle": (0.80, 0.35, 0.35)}
 
@@ -37,18 +37,38 @@ def _face_colours(scene, faces_tet, activation_of_tet):
     return col
 
 
-def _shade(e1, e2, view, depth_axis) -> np.ndarray:
+def _facing(view) -> tuple:
+    """(depth axis, sign): the picture's right and up are the axes ``view``;
+    the viewer looks from sign x the depth axis (right x up, right-handed)."""
+    depth_axis = ({0, 1, 2} - set(view)).pop()
+    return depth_axis, (1.0 if tuple(view) in ((0, 1), (1, 2), (2, 0)) else -1.0)
+
+
+def _shade(e1, e2, view) -> np.ndarray:
     """Lambert shading of faces (edges e1, e2: (f, 3)) lit from over the
     viewer's upper left, so the surfaces read as 3D: 0.35 (facing away from the
     light) to 1 (facing it)."""
+    depth_axis, sign = _facing(view)
     n = np.cross(e1, e2)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     light = np.zeros(3)
-    light[depth_axis] = 1.0 if view == (0, 1) else -1.0   # toward the viewer (the faces kept face it)
-    light[view[1]] += 0.6    # from above
-    light[view[0]] -= 0.4    # and the left
+    light[depth_axis] = sign   # toward the viewer (the faces kept face it)
+    light[view[1]] += 0.6      # from above
+    light[view[0]] -= 0.4      # and the left
     light /= np.linalg.norm(light)
     return 0.35 + 0.65 * np.clip(n @ light, 0.0, 1.0)
+
+
+def default_view(scene, points=None) -> tuple:
+    """The picture axes (right, up) that show a scene's motion: looking along
+    the first hinge's axis (the bone turns in the picture plane), else along
+    the rest mesh's thinnest side; up is the longer of the other two sides."""
+    points = scene.points if points is None else np.asarray(points)
+    extent = points.max(axis=0) - points.min(axis=0)
+    hinges = [j for j in scene.joints() if j.axis is not None] if scene.movable_bones else []
+    depth = int(np.argmax(np.abs(hinges[0].axis))) if hinges else int(np.argmin(extent))
+    a, b = [k for k in range(3) if k != depth]
+    return (a, b) if extent[b] >= extent[a] else (b, a)
 
 
 def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0, 1), columns=4):
@@ -57,13 +77,14 @@ def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0
     frames       list of (n, 3) positions
     titles       one string per frame
     activations  one {muscle: normalised activation} per frame (muscle colour)
-    view         the two coordinate axes on the picture plane (default x, y)
+    view         the picture's (right, up) coordinate axes (default x, y; default_view(scene)
+                 picks one that shows the motion); the viewer looks from right x up
     """
     plt = _pyplot()
     from matplotlib.collections import PolyCollection
 
     faces, faces_tet = boundary_faces(scene.tets, return_tets=True)
-    depth_axis = ({0, 1, 2} - set(view)).pop()
+    depth_axis, sign = _facing(view)
     n = len(frames)
     cols = min(columns, n)
     rows = (n + cols - 1) // cols
@@ -84,11 +105,11 @@ def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0
         tri = P[faces]
         # faces towards the viewer, painted back to front (depth-sorted)
         e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-        nrm = np.cross(e1, e2)[:, depth_axis] * (1 if view == (0, 1) else -1)
+        nrm = np.cross(e1, e2)[:, depth_axis] * sign
         keep = np.flatnonzero(nrm > 0)
-        order = keep[np.argsort(tri[keep, :, depth_axis].mean(axis=1))]
+        order = keep[np.argsort(sign * tri[keep, :, depth_axis].mean(axis=1), kind="stable")]
         poly = tri[order][:, :, list(view)]
-        col = _face_colours(scene, faces_tet[order], act_tet) * _shade(e1[order], e2[order], view, depth_axis)[:, None]
+        col = _face_colours(scene, faces_tet[order], act_tet) * _shade(e1[order], e2[order], view)[:, None]
         ax.add_collection(PolyCollection(poly, facecolors=col, edgecolors=(0, 0, 0, 0.06), linewidths=0.2))
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)

@@ -1,0 +1,51 @@
+"""Pictures: the contact sheet shows what is nearest the viewer, from every
+view, and default_view looks along a hinge."""
+import matplotlib.image
+import numpy as np
+import pytest
+
+import emu
+from emu.io.plots import PART_COLOURS, contact_sheet, default_view
+
+from test_io import _box
+
+
+def _bone_in_front_of_muscle(depth_axis, sign):
+    """A unit bone block and a muscle block behind it (further from a viewer at
+    sign x the depth axis), overlapping in the picture: a Scene."""
+    bp, bt = _box([0, 0, 0], [1, 1, 1], 2)
+    mp, mt = _box([0, 0, 0], [1, 1, 1], 2)
+    shift = np.zeros(3)
+    shift[depth_axis] = -2.0 * sign       # the muscle two units further away
+    mp = mp * [1.5, 1.5, 1.5] - 0.25 + shift   # and larger, so it shows around the bone
+    scene = emu.Scene(np.vstack([bp, mp]), np.vstack([bt, mt + len(bp)]), warn=False)
+    scene.add_bone("bone", np.arange(len(bt)))
+    scene.add_muscle("muscle", len(bt) + np.arange(len(mt)), fibers=[0.0, 0.0, 1.0])
+    return scene
+
+
+@pytest.mark.parametrize("view", [(0, 1), (1, 0), (1, 2), (2, 1), (2, 0), (0, 2)])
+def test_the_nearest_part_covers_the_picture_centre(tmp_path, view):
+    depth = ({0, 1, 2} - set(view)).pop()
+    sign = 1.0 if view in [(0, 1), (1, 2), (2, 0)] else -1.0   # the viewer: right x up
+    scene = _bone_in_front_of_muscle(depth, sign)
+    path = tmp_path / "sheet.png"
+    contact_sheet(path, scene, [scene.points], view=view)
+    img = matplotlib.image.imread(path)[:, :, :3]
+    h, w = img.shape[:2]
+    centre = img[h // 2 - 3:h // 2 + 4, w // 2 - 3:w // 2 + 4].reshape(-1, 3).mean(axis=0)
+    # bone is pale beige (red ~ green), a relaxed muscle pink (red well above green)
+    bone = np.asarray(PART_COLOURS["bone"])
+    assert centre[0] - centre[1] < 0.12, (centre, bone)
+    ring = img[h // 2, int(0.2 * w):int(0.8 * w)]
+    assert np.any(ring[:, 0] - ring[:, 1] > 0.15)   # the muscle shows beside the bone
+
+
+def test_default_view_looks_along_the_hinge():
+    scene = emu.scenes.arm(1)                       # the elbow hinge's axis
+    [j] = [j for j in scene.joints() if j.axis is not None]
+    depth = int(np.argmax(np.abs(j.axis)))
+    view = default_view(scene)
+    assert depth not in view and len(set(view)) == 2
+    extent = np.ptp(scene.points, axis=0)
+    assert extent[view[1]] >= extent[view[0]]
