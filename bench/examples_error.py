@@ -1,9 +1,12 @@
-"""Every example scene file with its own settings (EMU's default accuracy 0.01):
-EMU's largest vertex error to FEM over all frames, its own estimate, times,
-and the FEM factorisations its error estimates made.
+"""Every example scene file with its own settings (EMU's default accuracy 0.01),
+each frame solved by EMU and by strict FEM: EMU's vertex error to FEM, its own
+estimate, both methods' times, and the FEM factorisations its estimates made.
 
-    python bench/examples_error.py [examples/*.toml] [--emu-step-fraction F]
+    python bench/examples_error.py [examples/*.toml] [--emu-step-fraction F] [--docs DIR]
 
+Prints the summary table (the README's examples table). --docs DIR also
+writes DIR/examples.md (per example: a picture of EMU's frames and the
+per-frame table) and DIR/images/examples/<name>.png.
 --emu-step-fraction F: EMU's accuracy stopping rule at F of the target
 instead of the scene's (Solver(step_fraction=F)).
 """
@@ -11,51 +14,155 @@ from __future__ import annotations
 
 import glob
 import os
+import subprocess
 import sys
 import time
 import warnings
 
+import numpy as np
+
 import emu
 from emu.app.scenefile import load_scene_file
+from emu.io.plots import contact_sheet, default_view
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+PICTURE_FRAMES = 8
+
+
+def _first_comment(path) -> str:
+    """The example's own description: its leading comment lines, joined."""
+    lines = []
+    with open(path) as f:
+        for line in f:
+            if not line.startswith("#"):
+                break
+            text = line[1:].strip()
+            if text.startswith("emu run") or text.startswith("python "):
+                continue
+            lines.append(text)
+    return " ".join(lines)
+
+
+def run_example(path, extra: dict) -> dict:
+    """Solve every frame with EMU (the scene's settings) and strict FEM."""
+    spec = load_scene_file(path)
+    emu_solver = emu.Solver(spec.scene, **{**spec.solver, "method": "emu", **extra})
+    fem_solver = emu.Solver(spec.scene, "fem", rtol_grad=1e-9)
+    prev_e = prev_f = None
+    rows, frames = [], {}
+    picks = set(np.linspace(0, spec.frames - 1, min(PICTURE_FRAMES, spec.frames)).round().astype(int).tolist())
+    for k in range(spec.frames):
+        act, poses = spec.activation(k), spec.bone_poses(k) or None
+        se = emu_solver.solve(act, bone_poses=poses, initial=prev_e)
+        sf = fem_solver.solve(act, bone_poses=poses, initial=prev_f)
+        prev_e, prev_f = se, sf
+        angles = {b: emu.bone_angle(spec.scene, se.positions, b) for b in spec.scene.movable_bones}
+        rows.append({"frame": k, "time": k * spec.dt, "emu_s": se.time_s, "estimate_s": se.error_estimate_time_s,
+                     "fem_s": sf.time_s, "error": emu.vertex_error(se, sf), "estimate": se.error_estimate,
+                     "alpha": se.settings["alpha"], "corrected": se.corrected, "angles": angles,
+                     "activation": {m: a / spec.scene.parts[m].max_activation for m, a in act.items()},
+                     "converged": se.converged and sf.converged})
+        if k in picks:
+            frames[k] = se.positions.copy()
+    mode = f"accuracy {emu_solver.accuracy:g}" if emu_solver.accuracy else f"alpha {emu_solver.alpha:g}"
+    return {"path": path, "spec": spec, "rows": rows, "frames": frames, "mode": mode,
+            "factorizations": getattr(emu_solver._estimator, "factorizations", 0)}
+
+
+def summary_row(r) -> str:
+    rows = r["rows"]
+    te, tf = sum(x["emu_s"] for x in rows), sum(x["fem_s"] for x in rows)
+    test = sum(x["estimate_s"] for x in rows)
+    worst = max(x["error"] for x in rows)
+    worst_est = max((x["estimate"] or 0.0) for x in rows)
+    alphas = [x["alpha"] for x in rows]
+    return (f"| {os.path.basename(r['path'])} | {len(r['spec'].scene.tets)} | {len(rows)} | {r['mode']} | "
+            f"{te:.2f} ({test:.2f}) | {tf:.2f} | {worst:.2e} | {worst_est:.2e} | {min(alphas):.0f}-{max(alphas):.0f} | "
+            f"{r['factorizations']} |")
+
+
+def write_page(results, docs_dir, header: str) -> str:
+    """docs_dir/examples.md and one picture per example under images/examples."""
+    img_dir = os.path.join(docs_dir, "images", "examples")
+    os.makedirs(img_dir, exist_ok=True)
+    out = ["# Examples, each checked against FEM", "",
+           "Every scene file in `examples/`, run as `emu run` runs it (EMU at the file's settings, "
+           "`accuracy = 0.01` unless it says otherwise) and, frame by frame, by FEM Newton to the strict "
+           "tolerance (|g| <= 1e-9 |g0|) from its own previous frame. *error* is the largest vertex "
+           "distance between EMU's and FEM's answers over the rest mesh's bounding-box diagonal; "
+           "*estimate* is EMU's own estimate of it (no FEM solve needed); times are each method's whole "
+           "solve of the frame (EMU's includes its estimate). Pictures show EMU's frames.", "",
+           f"Produced by `python bench/examples_error.py --docs docs` ({header}).", ""]
+    for r in results:
+        name = os.path.splitext(os.path.basename(r["path"]))[0]
+        spec, rows = r["spec"], r["rows"]
+        png = os.path.join(img_dir, name + ".png")
+        ks = sorted(r["frames"])
+        titles = []
+        for k in ks:
+            turn = ", ".join(f"{b} {a:+.0f}\u00b0" for b, a in list(rows[k]["angles"].items())[:2])
+            titles.append(f"frame {k}, t = {rows[k]['time']:.2f} s" + (f"\n{turn}" if turn else ""))
+        contact_sheet(png, spec.scene, [r["frames"][k] for k in ks], titles=titles,
+                      activations=[rows[k]["activation"] for k in ks],
+                      view=spec.output.get("view") or default_view(spec.scene), columns=4)
+        te, tf = sum(x["emu_s"] for x in rows), sum(x["fem_s"] for x in rows)
+        out += [f"## {name}", "", _first_comment(r["path"]), "",
+                f"`emu run examples/{name}.toml`: {len(spec.scene.tets):,} tets, {len(rows)} frames; "
+                f"EMU {te:.2f} s, FEM {tf:.2f} s in all; EMU's largest error "
+                f"{100 * max(x['error'] for x in rows):.2f}% (its estimate "
+                f"{100 * max((x['estimate'] or 0.0) for x in rows):.2f}%).", "",
+                f"![{name}](images/examples/{name}.png)", "",
+                "| frame | t (s) | " + "".join(f"{m} | " for m in spec.scene.muscles)
+                + "".join(f"{b} (deg) | " for b in spec.scene.movable_bones)
+                + "EMU s | FEM s | error | estimate | alpha |",
+                "|" + "---|" * (7 + len(spec.scene.muscles) + len(spec.scene.movable_bones))]
+        for x in rows:
+            est = "-" if x["estimate"] is None else f"{100 * x['estimate']:.2f}%"
+            flag = " (FEM-corrected)" if x["corrected"] else ""
+            out.append(f"| {x['frame']} | {x['time']:.2f} | "
+                       + "".join(f"{x['activation'].get(m, 0.0):.2f} | " for m in spec.scene.muscles)
+                       + "".join(f"{x['angles'][b]:+.1f} | " for b in spec.scene.movable_bones)
+                       + f"{x['emu_s']:.3f} | {x['fem_s']:.3f} | {100 * x['error']:.2f}% | {est}{flag} | "
+                         f"{x['alpha']:.0f} |")
+        out.append("")
+    page = os.path.join(docs_dir, "examples.md")
+    with open(page, "w") as f:
+        f.write("\n".join(out))
+    return page
 
 
 def main(argv=None):
     args = list(argv if argv is not None else sys.argv[1:])
-    extra = {}
+    extra, docs = {}, None
     if "--emu-step-fraction" in args:
         i = args.index("--emu-step-fraction")
         extra["step_fraction"] = float(args[i + 1])
         del args[i:i + 2]
+    if "--docs" in args:
+        i = args.index("--docs")
+        docs = args[i + 1]
+        del args[i:i + 2]
     paths = args or sorted(glob.glob(os.path.join(HERE, "..", "examples", "*.toml")))
     warnings.simplefilter("ignore")
     i = emu.info()
-    print(f"emu {i['version']}; BLAS {i['config']}; OpenMP threads {i['omp_threads']}; {time.strftime('%Y-%m-%d')}\n")
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=HERE).stdout.strip()
+    except OSError:
+        commit = "?"
+    header = (f"emu {i['version']} at {commit}; BLAS {i['config']}; OpenMP threads {i['omp_threads']}; "
+              f"{time.strftime('%Y-%m-%d')}")
+    print(header + "\n")
     print("| example | tets | frames | EMU settings | EMU s (of it estimates s) | FEM s | max true error | max estimate | "
           "alpha range | estimate's factorisations |")
     print("|---|---|---|---|---|---|---|---|---|---|")
+    results = []
     for path in paths:
-        spec = load_scene_file(path)
-        emu_solver = emu.Solver(spec.scene, **{**spec.solver, "method": "emu", **extra})
-        fem_solver = emu.Solver(spec.scene, "fem", rtol_grad=1e-9)
-        prev_e = prev_f = None
-        worst = worst_est = 0.0
-        te = tf = test = 0.0
-        alphas = []
-        for k in range(spec.frames):
-            act, poses = spec.activation(k), spec.bone_poses(k) or None
-            se = emu_solver.solve(act, bone_poses=poses, initial=prev_e)
-            sf = fem_solver.solve(act, bone_poses=poses, initial=prev_f)
-            prev_e, prev_f = se, sf
-            te, tf, test = te + se.time_s, tf + sf.time_s, test + se.error_estimate_time_s
-            worst = max(worst, emu.vertex_error(se, sf))
-            worst_est = max(worst_est, se.error_estimate or 0.0)
-            alphas.append(se.settings["alpha"])
-        mode = f"accuracy {emu_solver.accuracy:g}" if emu_solver.accuracy else f"alpha {emu_solver.alpha:g}"
-        print(f"| {os.path.basename(path)} | {len(spec.scene.tets)} | {spec.frames} | {mode} | {te:.2f} ({test:.2f}) | "
-              f"{tf:.2f} | {worst:.2e} | {worst_est:.2e} | {min(alphas):.0f}-{max(alphas):.0f} | "
-              f"{getattr(emu_solver._estimator, 'factorizations', 0)} |", flush=True)
+        r = run_example(path, extra)
+        print(summary_row(r), flush=True)
+        results.append(r)
+    if docs:
+        print(f"wrote {write_page(results, docs, header)}")
 
 
 if __name__ == "__main__":
