@@ -104,7 +104,7 @@ def write_page(results, docs_dir, header: str) -> str:
             titles.append(f"frame {k}, t = {rows[k]['time']:.2f} s" + (f"\n{turn}" if turn else ""))
         contact_sheet(png, spec.scene, [r["frames"][k] for k in ks], titles=titles,
                       activations=[rows[k]["activation"] for k in ks],
-                      view=spec.output.get("view") or default_view(spec.scene), columns=4)
+                      view=spec.output.get("view") or default_view(spec.scene))
         te, tf = sum(x["emu_s"] for x in rows), sum(x["fem_s"] for x in rows)
         out += [f"## {name}", "", _first_comment(r["path"]), "",
                 f"`emu run examples/{name}.toml`: {len(spec.scene.tets):,} tets, {len(rows)} frames; "

@@ -57,7 +57,7 @@ def _preview(path, spec: SceneSpec, kept: dict, log: dict) -> None:
         turn = "" if not angles else "\n" + ", ".join(f"{b} {a:+.0f}\u00b0" for b, a in list(angles.items())[:2])
         titles.append(f"frame {e['frame']}, t = {e['time']:.2f} s{turn}")
     contact_sheet(path, scene, [kept[k] for k in frames], titles=titles, activations=acts,
-                  view=spec.output.get("view") or default_view(scene), columns=4)
+                  view=spec.output.get("view") or default_view(scene))
 
 
 def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_frame=None) -> dict:

@@ -71,10 +71,11 @@ def default_view(scene, points=None) -> tuple:
     return (a, b) if extent[b] >= extent[a] else (b, a)
 
 
-def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0, 1), columns=4):
+def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0, 1), columns=None):
     """Draw solved frames side by side, looking along the axis not in ``view``.
 
     frames       list of (n, 3) positions
+    columns      pictures per row (default: all in one row up to four, else two rows)
     titles       one string per frame
     activations  one {muscle: normalised activation} per frame (muscle colour)
     view         the picture's (right, up) coordinate axes (default x, y; default_view(scene)
@@ -86,7 +87,8 @@ def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0
     faces, faces_tet = boundary_faces(scene.tets, return_tets=True)
     depth_axis, sign = _facing(view)
     n = len(frames)
-    cols = min(columns, n)
+    cols = columns or (n if n <= 4 else (n + 1) // 2)
+    cols = min(cols, n)
     rows = (n + cols - 1) // cols
     allp = np.concatenate([np.asarray(f)[:, list(view)] for f in frames])
     lo, hi = allp.min(axis=0), allp.max(axis=0)
