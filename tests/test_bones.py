@@ -401,6 +401,25 @@ def test_joint_stiffness_derivatives_and_agreement():
     assert total(angles["fem"] - 0.5) > e0 and total(angles["fem"] + 0.5) > e0
 
 
+def test_a_stiff_shoulder_spring_converges_in_filtered_steps():
+    """The upper limb's humerus on a 1 N m / rad shoulder spring, the biceps at
+    0.3: EMU takes filtered steps there (the chain's exact Hessian is
+    indefinite), and the spring's only curvature is SO(3)'s term, which the
+    filtered Hessian keeps (clamped): without it EMU ran out of 500 iterations;
+    with it, it converges and lands as near FEM as with a soft spring."""
+    from emu.anatomy import upper_limb
+
+    errors = {}
+    for k in (0.05, 1.0):
+        s = upper_limb(resolution=1, shoulder_stiffness=k)
+        act = {"biceps": 0.3}
+        sol = emu.Solver(s, "emu", alpha=100).solve(act, normalized=True)
+        assert sol.converged and sol.iterations < 150, (k, sol.iterations, sol.status)
+        assert sol.filtered_steps > 0
+        errors[k] = emu.vertex_error(sol, emu.Solver(s, "fem").solve(act, normalized=True))
+    assert errors[1.0] < 1.5 * errors[0.05] and errors[1.0] < 0.03, errors
+
+
 # ------------------------------------------------------------- the constrained fit, independently
 def test_bone_fit_matches_a_dense_constrained_least_squares():
     """EMU's fit x*(F) with a movable bone and a hinge (bordered factor, null-space

@@ -1,5 +1,7 @@
 #include "emu/solvers/emu_solver.h"
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -191,6 +193,19 @@ void EmuSolver::riemannian_columns(const Mat9X& F, const Mat9X& g, const Mat9X& 
     if (curvature) {
       const Mat3 RtG = R.transpose() * unflatten(g.col(u));
       M -= unflatten(v.col(u)) * (0.5 * (RtG + RtG.transpose()));
+    } else if (const int b = u - layout_.num_soft; b < model_.bone_stiffness.size() && model_.bone_stiffness(b) > 0) {
+      // The joint spring's whole curvature is this term (its Euclidean Hessian
+      // is zero): kept, clamped PSD, so filtered steps feel the spring.
+      // For v = R [w]x it is R [C w / 2]x, C = k/2 (tr R I - sym R).
+      const Mat3 C = joint_spring::expmap_hessian(R, model_.bone_stiffness(b));
+      Eigen::SelfAdjointEigenSolver<Mat3> eig(C);
+      const Mat3 Cp = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
+                      eig.eigenvectors().transpose();
+      const Mat3 W = R.transpose() * unflatten(v.col(u));
+      const Eigen::Vector3d a = 0.25 * (Cp * Eigen::Vector3d(W(2, 1) - W(1, 2), W(0, 2) - W(2, 0), W(1, 0) - W(0, 1)));
+      Mat3 A;
+      A << 0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0;
+      M += R * A;
     }
     out.col(u) = flatten(project_to_tangent(R, M));
   }
