@@ -32,6 +32,8 @@ def test_emu_run_end_to_end(tmp_path):
     assert all((out / f).exists() and (out / f.replace(".vtu", ".obj")).exists() for f in files)
     log = json.loads((out / "log.json").read_text())
     assert len(log["frames"]) == 3 and all(f["converged"] for f in log["frames"])
+    assert [(p["name"], p["kind"]) for p in log["parts"]] == [("belly", "muscle"), ("tendons", "tendon")]
+    assert "o belly" in (out / "frame_0000.obj").read_text()
     assert (out / "preview.png").stat().st_size > 10_000 and "preview.png" in r.stdout
     # a rerun with fewer frames into the same folder removes the first run's
     # files (its frame 2, its preview) and nothing else

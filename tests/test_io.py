@@ -355,3 +355,29 @@ def test_cracks_are_named_and_welded(tmp_path, mesh):
     whole = emu.io.load_scene(tmp_path / "whole.vtu", kinds=kinds, fibers={"part0": "laplace"})
     assert welded.cracks() == [] and len(welded.points) == len(m.points)
     assert len(welded.attachments("part0")["part1"]) == len(whole.attachments("part0")["part1"])
+
+
+def test_outputs_name_the_parts(tmp_path):
+    """A solved frame's VTU names each part in its field data (read back by
+    meshio and by emu.io.read, so a reload keeps the names), and an OBJ with
+    part groups holds one object per part with exactly that part's faces."""
+    import meshio
+
+    scene = emu.scenes.arm(1)
+    sol = emu.Solver(scene, "fem").solve({"flexor": 0.1}, normalized=True)
+    emu.io.write_solution(tmp_path / "f.vtu", scene, sol)
+    fd = meshio.read(tmp_path / "f.vtu").field_data
+    assert {k: int(v[0]) for k, v in fd.items()} == {f"part:{n}": k for k, n in enumerate(scene.parts)}
+    assert emu.io.read(tmp_path / "f.vtu").part_names == dict(enumerate(scene.parts))
+    faces, faces_tet = emu.io.boundary_faces(scene.tets, return_tets=True)
+    emu.io.write_obj(tmp_path / "f.obj", sol.positions, faces, emu.io.part_groups(scene, faces_tet))
+    objects, current = {}, None
+    for line in (tmp_path / "f.obj").read_text().splitlines():
+        if line.startswith("o "):
+            current = line[2:]
+            objects[current] = 0
+        elif line.startswith("f "):
+            objects[current] += 1
+    assert list(objects) == list(scene.parts)
+    for name, count in objects.items():
+        assert count == np.isin(faces_tet, scene.parts[name].tets).sum() > 0

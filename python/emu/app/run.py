@@ -18,7 +18,7 @@ import numpy as np
 
 from ..advice import method_hint
 from ..bones import bone_angle
-from ..io.obj import boundary_faces, write_obj
+from ..io.obj import boundary_faces, part_groups, write_obj
 from ..io.plots import contact_sheet, default_view
 from ..io.vtk import write_pvd, write_solution
 from ..runtime import info as runtime_info
@@ -69,10 +69,16 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
     if cleared:
         progress(f"removed {cleared} file(s) an earlier run wrote in {out}")
     solver = Solver(spec.scene, **spec.solver)
-    faces = boundary_faces(spec.scene.tets) if spec.output.get("obj", True) else None
+    faces = groups = None
+    if spec.output.get("obj", True):
+        faces, faces_tet = boundary_faces(spec.scene.tets, return_tets=True)
+        groups = part_groups(spec.scene, faces_tet)
     info = runtime_info()
     log = {"scene": spec.source, "method": solver.method, "settings": solver.settings, "blas": info["config"],
-           "threads": info["omp_threads"], "setup_s": solver.setup_time_s, "frames": [], "interrupted": False}
+           "threads": info["omp_threads"], "setup_s": solver.setup_time_s,
+           "parts": [{"id": k, "name": p.name, "kind": p.kind, "tets": len(p.tets)}
+                     for k, p in enumerate(spec.scene.parts.values())],
+           "frames": [], "interrupted": False}
     pvd = []
     prev = None
     want_preview = spec.output.get("preview", True)
@@ -95,7 +101,7 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                                fibers=solver.fibers)
                 pvd.append((k * spec.dt, name + ".vtu"))
             if faces is not None:
-                write_obj(os.path.join(out, name + ".obj"), sol.positions, faces)
+                write_obj(os.path.join(out, name + ".obj"), sol.positions, faces, groups)
             angles = {name: curve.value(k, k * spec.dt) for name, (_, _, curve) in spec.bones.items()}
             for name in spec.scene.movable_bones:
                 angles[name] = bone_angle(spec.scene, sol.positions, name)

@@ -2,8 +2,8 @@
 ParaView series (``vtk``), OBJ surfaces for Blender (``obj``) and the PNG
 figures of a run (``plots``, imported on its own: ``emu.io.plots``)."""
 from .mesh import TetMesh, load_scene, read, write
-from .obj import boundary_faces, write_obj
+from .obj import boundary_faces, part_groups, write_obj
 from .vtk import tet_activation, write_pvd, write_solution
 
 __all__ = ["TetMesh", "read", "write", "load_scene", "write_solution", "write_pvd", "tet_activation",
-           "boundary_faces", "write_obj"]
+           "boundary_faces", "write_obj", "part_groups"]

@@ -75,6 +75,9 @@ def read(path) -> TetMesh:
                                  if np.asarray(v).size >= 2):
             if int(dim) == 3:
                 out.part_names[int(tag)] = str(name)
+    for key, value in (mesh.field_data or {}).items():
+        if key.startswith(PART_NAME_PREFIX) and np.asarray(value).size == 1:   # emu's VTU part names
+            out.part_names[int(np.asarray(value).ravel()[0])] = key[len(PART_NAME_PREFIX):]
     meta = os.path.join(os.path.dirname(path), "scene.json")
     if os.path.exists(meta):
         with open(meta) as f:
@@ -85,8 +88,31 @@ def read(path) -> TetMesh:
     return out
 
 
-def write(path, points, tets, *, cell_data: dict | None = None, point_data: dict | None = None):
-    """Write a tet mesh; the format follows the extension (.vtu, .vtk, .msh, .mesh, ...)."""
+# VTU field data naming the parts: one Int32 array per part, "part:<name>",
+# holding its id in the ``part`` cell data (ParaView lists them under Field Data).
+PART_NAME_PREFIX = "part:"
+
+
+def _vtu_part_names(path: str, part_names: dict) -> None:
+    """Insert the part names as FieldData into a VTU meshio wrote (meshio's VTU
+    writer drops field data)."""
+    from xml.sax.saxutils import quoteattr
+
+    arrays = "".join(f'<DataArray type="Int32" Name={quoteattr(PART_NAME_PREFIX + str(name))} '
+                     f'NumberOfTuples="1" format="ascii">{int(pid)}</DataArray>\n'
+                     for pid, name in sorted(part_names.items()))
+    with open(path) as f:
+        text = f.read()
+    text = text.replace("<UnstructuredGrid>\n", f"<UnstructuredGrid>\n<FieldData>\n{arrays}</FieldData>\n", 1)
+    with open(path, "w") as f:
+        f.write(text)
+
+
+def write(path, points, tets, *, cell_data: dict | None = None, point_data: dict | None = None,
+          part_names: dict | None = None):
+    """Write a tet mesh; the format follows the extension (.vtu, .vtk, .msh, .mesh, ...).
+    part_names  {part id: name} of the ``part`` cell data: a VTU names them in
+                its field data (PART_NAME_PREFIX + name = id), which read() reads back."""
     import meshio
 
     cells = [("tetra", np.asarray(tets, dtype=np.int64))]
@@ -97,6 +123,8 @@ def write(path, points, tets, *, cell_data: dict | None = None, point_data: dict
     fmt = "gmsh" if path.lower().endswith(".msh") else None
     meshio.write_points_cells(path, np.asarray(points, dtype=np.float64), cells,
                               point_data=pd or None, cell_data=cd or None, file_format=fmt)
+    if part_names and path.lower().endswith(".vtu"):
+        _vtu_part_names(path, part_names)
 
 
 def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_bones=(), warn=True,

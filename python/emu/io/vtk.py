@@ -35,8 +35,8 @@ def tet_activation(scene, activation) -> np.ndarray:
 
 def write_solution(path, scene, solution, *, activation=None, fibers=None):
     """A solved frame as a mesh: deformed points; point data displacement; cell
-    data part (index in scene.parts), fiber (deformed, unit), J and, if given,
-    activation.
+    data part (index in scene.parts; a VTU names each part in its field data,
+    "part:<name>" = index), fiber (deformed, unit), J and, if given, activation.
 
     solution    a Solution or its (n, 3) positions
     activation  what the frame was solved with: {muscle: absolute a} (other tets
@@ -64,7 +64,8 @@ def write_solution(path, scene, solution, *, activation=None, fibers=None):
     if activation is not None:
         cell_data["activation"] = tet_activation(scene, activation)
     cell_data["J"] = J
-    write(path, x, scene.tets, cell_data=cell_data, point_data={"displacement": x - scene.points})
+    write(path, x, scene.tets, cell_data=cell_data, point_data={"displacement": x - scene.points},
+          part_names=dict(enumerate(scene.parts)))
 
 
 def write_pvd(path, entries):
