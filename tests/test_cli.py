@@ -151,3 +151,27 @@ def test_emu_data_and_scene_names(tmp_path):
     assert "bottom_bone" in r.stdout and "hinge" in r.stdout
     r = emu_cli("data", "no_such_scene")
     assert r.returncode == 1 and "no_such_scene" in r.stderr and "simple_joint" in r.stderr
+
+
+def test_cli_messages_a_user_can_act_on(tmp_path):
+    """A mesh given to emu run points at emu solve; a warning prints as one
+    line (no Python source line); a muscle lying on a bone apart from it is
+    named in that warning."""
+    from test_io import _box
+
+    muscle_points, muscle_tets = _box([0, 0, 0], [1, 1, 2], 4)
+    bone_points, bone_tets = _box([0, 0, -1], [1, 1, 0], 3)
+    top_points, top_tets = _box([0, 0, 2], [1, 1, 3], 4)
+    points = np.vstack([muscle_points, bone_points, top_points])
+    tets = np.vstack([muscle_tets, bone_tets + len(muscle_points), top_tets + len(muscle_points) + len(bone_points)])
+    part = np.concatenate([np.zeros(len(muscle_tets), int), np.ones(len(bone_tets), int), np.full(len(top_tets), 2)])
+    mesh = tmp_path / "m.vtu"
+    emu.io.write(mesh, points, tets, cell_data={"part": part}, part_names={0: "belly", 1: "floor", 2: "roof"})
+    r = emu_cli("run", str(mesh))
+    assert r.returncode == 2 and "is a mesh, not a scene file" in r.stderr and f"emu solve {mesh}" in r.stderr, r.stderr
+    r = emu_cli("solve", str(mesh), "--kind", "floor=bone", "roof=bone", "--fibers", "belly=0,0,1", "--weld",
+                "--activation", "belly=1e3", "--method", "fem")
+    assert r.returncode == 0, r.stdout + r.stderr
+    warnings_ = [line for line in r.stderr.splitlines() if line.strip()]
+    assert any(w.startswith("emu: warning: ") and "lies on bone 'floor'" in w for w in warnings_), r.stderr
+    assert all(w.startswith("emu: warning: ") for w in warnings_), r.stderr      # nothing else: no source lines

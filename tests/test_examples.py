@@ -32,3 +32,12 @@ def test_example_loads_and_its_first_frames_solve(path, tmp_path):
     log = run_scene(spec, str(tmp_path), progress=lambda *a, **k: None)
     assert [f["converged"] for f in log["frames"]] == [True, True], [f["status"] for f in log["frames"]]
     assert (tmp_path / "series.pvd").exists()
+
+
+def test_the_example_sweep_file_loads_and_every_case_builds():
+    from emu.app.sweep import check_cases, load_sweep
+
+    [path] = (Path(__file__).resolve().parents[1] / "examples" / "sweeps").glob("*.toml")
+    spec = load_sweep(path)
+    assert len(spec["cases"]) == 8 and spec["plot"] == "angle:forearm"
+    check_cases(spec["base"], spec["cases"], spec["plot"])   # raises naming a case that would fail

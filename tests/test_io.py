@@ -381,3 +381,26 @@ def test_outputs_name_the_parts(tmp_path):
     assert list(objects) == list(scene.parts)
     for name, count in objects.items():
         assert count == np.isin(faces_tet, scene.parts[name].tets).sum() > 0
+
+
+def test_emu_info_names_a_part_held_by_nothing(tmp_path, capsys):
+    """A muscle on a fixed bone and a second muscle apart from everything:
+    emu info says, before any solve, which part nothing holds and how to fix
+    it (and exits 1); emu solve refuses it with the same words."""
+    from emu.app.cli import main
+
+    points, tets = _box([0, 0, -1], [1, 1, 2], 3)
+    part = np.where(points[tets].mean(axis=1)[:, 2] < 0, 1, 0)
+    stray_points, stray_tets = _box([3, 0, 0], [4, 1, 1], 2)
+    points = np.vstack([points, stray_points])
+    tets = np.vstack([tets, stray_tets + len(points) - len(stray_points)])
+    part = np.concatenate([part, np.full(len(stray_tets), 2)])
+    path = tmp_path / "stray.vtu"
+    emu.io.write(path, points, tets, cell_data={"part": part}, part_names={0: "belly", 1: "bone", 2: "stray"})
+    args = [str(path), "--kind", "bone=bone", "--fibers", "belly=0,0,1", "stray=0,0,1"]
+    assert main(["info", *args]) == 1
+    out = capsys.readouterr().out
+    assert "part stray: muscle" in out     # the names come from the file's field data
+    assert "cannot be solved as it is: 'stray' is held by nothing" in out and 'pins = ["stray"]' in out, out
+    with pytest.raises(ValueError, match="'stray' is held by nothing"):
+        emu.io.load_scene(path, kinds={"bone": "bone"}, fibers={"belly": [0, 0, 1.0], "stray": [0, 0, 1.0]}).validate()

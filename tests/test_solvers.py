@@ -302,9 +302,10 @@ def test_loose_component_without_pin():
     p2 = np.vstack([p, p + [5.0, 0, 0]])
     t2 = np.vstack([t, t + len(p)])
     s = emu.Scene(p2, t2)
-    s.add_muscle("belly", np.arange(len(t2)), np.vstack([m.fibers, m.fibers]))
+    s.add_muscle("belly", np.arange(len(t)), m.fibers)
+    s.add_muscle("stray", len(t) + np.arange(len(t)), m.fibers)
     s.pin(m.proximal)  # only the first copy
-    with pytest.raises(ValueError, match="connected piece"):
+    with pytest.raises(ValueError, match=r"'stray' is held by nothing .*pins = \[\"stray\"\]"):
         emu.Solver(s, "fem")
     s.pin(m.proximal + len(p))
     emu.Solver(s, "fem")  # both pinned: fine

@@ -127,6 +127,19 @@ def test_cli_sweep_and_its_refusals(tmp_path):
     with pytest.raises(SweepError, match="plot must be one of"):
         load_sweep(bad)
     assert case_id({"a": 1, "b": 2}) == case_id({"b": 2, "a": 1})
+    # every case is checked before any runs: a misspelt key in one case, a
+    # plotted bone that does not exist; nothing runs, each case is named
+    typo = write(tmp_path, {"solver.alpha": [30.0]}, extra="")
+    with open(typo, "a") as f:
+        f.write('[[cases]]\n"solver.method" = "fem"\n[[cases]]\n"solver.alfa" = 3.0\n')
+    with pytest.raises(SweepError, match=r"1 of 2 case\(s\) would fail, nothing was run:\n  case .*solver.alfa.*"
+                                         r"unknown key 'solver.alfa'"):
+        emu.sweep(typo, str(tmp_path / "q"), workers=1)
+    assert not any(p.name.startswith("case_") for p in (tmp_path / "q").iterdir())
+    elbow = write(tmp_path, {"solver.alpha": [30.0]}).read_text().replace("angle:forearm", "angle:elbow")
+    (tmp_path / "elbow.toml").write_text(elbow)
+    with pytest.raises(SweepError, match="no movable or scripted bone 'elbow' \\(bones: forearm\\)"):
+        emu.sweep(tmp_path / "elbow.toml", str(tmp_path / "r"), workers=1)
 
 
 def test_without_dask_the_command_says_how_to_get_it(tmp_path):

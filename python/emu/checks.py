@@ -199,7 +199,13 @@ def connected_components(num_vertices: int, tets: np.ndarray) -> np.ndarray:
     return _core.connected_components(int(num_vertices), tets.astype(np.int32, copy=False)).astype(np.int64)
 
 
-def check_anchored(num_vertices: int, tets: np.ndarray, pinned: np.ndarray, links=(), anchors=()):
+# How to hold a piece, at each front door.
+ANCHOR_FIX = ("attach it to a fixed bone (share vertices with it), pin it (scene file: pins = [\"{name}\"]; "
+              "Python: scene.pin(ids)), or remove it")
+
+
+def check_anchored(num_vertices: int, tets: np.ndarray, pinned: np.ndarray, links=(), anchors=(),
+                   vertex_parts=None):
     """Raise ValueError unless every connected piece of the mesh made of ``tets``
     holds a pinned vertex.
 
@@ -210,13 +216,17 @@ def check_anchored(num_vertices: int, tets: np.ndarray, pinned: np.ndarray, link
                   joint between two movable bones)
     anchors       vertex ids whose piece counts as anchored (a declared joint to
                   a fixed bone)
+    vertex_parts  optional callable: vertex ids -> the names of the parts they
+                  belong to (the message then names the parts of a loose piece)
     """
     used = np.zeros(num_vertices, bool)
     used[tets.ravel()] = True
     pinned = np.asarray(pinned, np.int64)
     if not np.any(used[pinned]):
-        raise ValueError("the scene is not anchored: pin some vertices (scene.pin) or attach the muscles "
-                         "to a fixed bone; without an anchor no equilibrium is unique")
+        raise ValueError("the scene is not anchored: nothing is pinned and no bone is fixed, so it can move "
+                         "freely and no equilibrium is unique; fix a bone (scene file: [bones.<name>] fixed = "
+                         "true; command line: leave it out of --free-bones), or pin vertices (scene file: pins = "
+                         "[\"<part>\"]; Python: scene.pin(ids))")
     comp = connected_components(num_vertices, tets)
     merged = {c: c for c in np.unique(comp[used])}
 
@@ -234,9 +244,17 @@ def check_anchored(num_vertices: int, tets: np.ndarray, pinned: np.ndarray, link
                                          comp[np.asarray(list(anchors), dtype=np.int64)]]))
     loose = np.setdiff1d(np.unique(comp[used]), anchored)
     if len(loose):
-        size = int(np.sum(comp[used] == loose[0]))
+        ids = np.flatnonzero(used)
+        piece = ids[comp[ids] == loose[0]]
+        if vertex_parts is not None:
+            names = vertex_parts(piece)
+            what = ", ".join(f"'{n}'" for n in names)
+            raise ValueError(f"{what} {'is' if len(names) == 1 else 'are'} held by nothing (no pinned vertex, "
+                             f"fixed bone or joint reaches {'it' if len(names) == 1 else 'them'}; {len(loose)} "
+                             f"such piece(s), this one {len(piece)} vertices), so no equilibrium is unique: "
+                             + ANCHOR_FIX.format(name=names[0]))
         raise ValueError(f"{len(loose)} connected piece(s) of the mesh have no pinned vertex (one has "
-                         f"{size} vertices); pin a vertex of every piece")
+                         f"{len(piece)} vertices); pin a vertex of every piece")
 
 
 def check_movable_bones(points: np.ndarray, bones: dict, held: np.ndarray):

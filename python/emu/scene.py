@@ -368,11 +368,17 @@ class Scene:
                 links.append((piece[a], piece[b]))
             elif a in piece or b in piece:
                 anchors.append(piece[a] if a in piece else piece[b])
-        check_anchored(len(self.points), self.tets[soft], pins, links, anchors)
+        check_anchored(len(self.points), self.tets[soft], pins, links, anchors, vertex_parts=self._parts_of_vertices)
         check_movable_bones(self.points, {n: tet_vertices(self.tets[self.parts[n].tets], len(self.points))
                                           for n in self.movable_bones}, pins)
         if not np.all(np.isfinite(self.gravity)) or np.shape(self.gravity) != (3,):
             raise ValueError(f"gravity must be a finite 3-vector, got {self.gravity!r}")
+
+    def _parts_of_vertices(self, ids) -> list:
+        """Names of the parts (in the scene's order) holding any of the vertices ids."""
+        mark = np.zeros(len(self.points), bool)
+        mark[np.asarray(ids, np.int64)] = True
+        return [p.name for p in self.parts.values() if mark[self.tets[p.tets]].any()]
 
     def acap_weight_of(self, part: Part) -> float:
         """The ACAP weight of a part (tendons without an explicit weight: default_tendon_weight)."""

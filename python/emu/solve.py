@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import re
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -383,7 +384,7 @@ class Solver:
                 raise ValueError(f"cg_forcing_min must lie in [0, 1) (0: no floor; above 0.5 it acts as 0.5, "
                                  f"the forcing term's cap), got {cg_forcing_min!r}")
         if method == "fem":
-            self._core = _core.FemSolver(self.model, opts)
+            self._core = self._named(_core.FemSolver, self.model, opts)
         else:
             eo = _core.EmuOptions()
             eo.alpha = float(alpha) * self.mu_ref
@@ -421,7 +422,7 @@ class Solver:
                 single_precision_preconditioner = single_precision_s0
             eo.single_precision_preconditioner = (True if single_precision_preconditioner is None
                                                   else bool(single_precision_preconditioner))
-            self._core = _core.EmuSolver(self.model, opts, eo)
+            self._core = self._named(_core.EmuSolver, self.model, opts, eo)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
                                  single_precision_preconditioner=eo.single_precision_preconditioner,
                                  preconditioner=preconditioner if step == "newton-krylov" else None,
@@ -445,6 +446,18 @@ class Solver:
         self._estimator = None       # FEM's Newton system for the error estimate, built at first use
         self._observers = (None, None)   # (on_iteration, iterates) of the solve in progress
         self._estimator_error = ""   # why there is none (a scene FEM does not handle)
+
+    def _named(self, make, *args):
+        """make(*args) with the C++ core's bone numbers in its errors replaced by
+        the bones' names (the core knows movable bones by their order)."""
+        try:
+            return make(*args)
+        except ValueError as e:
+            names = self.scene.movable_bones
+            text = re.sub(r"movable bones (\d+) and (\d+)",
+                          lambda m: f"movable bones '{names[int(m[1])]}' and '{names[int(m[2])]}'", str(e))
+            text = re.sub(r"movable bone (\d+)", lambda m: f"movable bone '{names[int(m[1])]}'", text)
+            raise ValueError(text) from None
 
     def activation_vector(self, activation=None, normalized: bool = False) -> np.ndarray:
         """Per-muscle absolute activations from a {muscle: value} dict (missing: 0)."""
@@ -697,7 +710,7 @@ class Solver:
             if self.contact is not None:   # the same energy as EMU's
                 opts.set_contact(self.contact)
             try:
-                self._estimator = _core.FemSolver(self.model, opts)
+                self._estimator = self._named(_core.FemSolver, self.model, opts)
             except ValueError as e:   # e.g. a closed loop of joints (FEM takes trees of bones)
                 self._estimator_error = f"no error estimate: {e}"
         if self._estimator is None:

@@ -92,6 +92,11 @@ def _print_info(args):
         m, n = len(scene.model_tets), len(scene.points)
         print(f"  memory estimate: FEM ~{(m * 144 * 8 + n * 3 * 60 * 8) / 2**20:.0f} MiB, "
               f"EMU ~{(m * 9 * 8 * 12 + m * 81 * 8 * 2) / 2**20:.0f} MiB plus the factor")
+        try:
+            scene.validate()
+        except ValueError as e:   # what emu solve / emu run would refuse, said here first
+            print(f"  cannot be solved as it is: {e}")
+            return 1
     return 0
 
 
@@ -375,11 +380,20 @@ def main(argv=None):
     g.add_argument("names", nargs="*", metavar="NAME", help=", ".join(datasets.names()))
     g.set_defaults(func=_data)
     args = ap.parse_args(argv)
+    previous = warnings.showwarning
+    warnings.showwarning = _show_warning
     try:
         return args.func(args)
     except (ValueError, FileNotFoundError, NotImplementedError, datasets.DatasetError) as e:
         print(f"emu: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        warnings.showwarning = previous
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """Warnings on the command line: the message, without Python's source line."""
+    print(f"emu: warning: {message}", file=file or sys.stderr)
 
 
 if __name__ == "__main__":

@@ -219,9 +219,19 @@ def _check_table(table, schema, where):
             raise SceneFileError(f"'{name}' must be {want}, got {type(value).__name__} ({value!r})")
 
 
+# Files that are meshes or surfaces, not scene files (emu run given one says what to do instead).
+_MESH_SUFFIXES = (".msh", ".vtu", ".vtk", ".mesh", ".node", ".ele", ".xdmf", ".med", ".inp", ".obj", ".stl",
+                  ".ply", ".off")
+
+
 def _read(path: str) -> dict:
     if not os.path.exists(path):
         raise FileNotFoundError(f"scene file not found: {path}")
+    if path.lower().endswith(_MESH_SUFFIXES):
+        raise SceneFileError(f"{path} is a mesh, not a scene file (.toml or .json): solve it at one activation "
+                             f"with `emu solve {path}`, or name it in a scene file ([mesh] path = "
+                             f"\"{os.path.basename(path)}\") to run frames; a parts file of surfaces goes to "
+                             "`emu mesh`")
     with open(path, "rb") as f:
         raw = f.read()
     if path.endswith(".json"):

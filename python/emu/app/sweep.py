@@ -125,6 +125,37 @@ def case_scene(base: str, params: dict) -> dict:
     return data
 
 
+def check_cases(base: str, cases: list, plot: str) -> None:
+    """Build every case's scene (without solving) and check the plotted bone,
+    so a mistake in any case stops the sweep before the first runs: raises
+    SweepError listing each case that would fail, with its parameters."""
+    import tempfile
+    import warnings
+
+    from .scenefile import load_scene_file
+
+    problems = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for params in cases:
+            path = os.path.join(tmp, "scene.json")
+            try:
+                with open(path, "w") as f:
+                    json.dump(case_scene(base, params), f)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    spec = load_scene_file(path)
+                if plot.startswith("angle:"):
+                    bones = list(spec.bones) + spec.scene.movable_bones
+                    if plot[6:] not in bones:
+                        raise SweepError(f"plot {plot!r}: no movable or scripted bone {plot[6:]!r} "
+                                         f"(bones: {', '.join(bones) or 'none'})")
+            except (ValueError, FileNotFoundError, KeyError) as e:
+                problems.append(f"case {json.dumps(params, sort_keys=True)}: {e}")
+    if problems:
+        raise SweepError(f"{len(problems)} of {len(cases)} case(s) would fail, nothing was run:\n  "
+                         + "\n  ".join(problems))
+
+
 def run_case(base: str, params: dict, out: str, plot: str, threads: int) -> dict:
     """One case in a worker: its scene file written to out/scene.json and run
     there (emu run); returns its results row. Never raises: a failure is the
@@ -146,8 +177,7 @@ def run_case(base: str, params: dict, out: str, plot: str, threads: int) -> dict
             log = run_scene(spec, out, progress=lambda line: print(line, file=logf, flush=True))
         frames = log["frames"]
         estimates = [f["error_estimate"] for f in frames if f.get("error_estimate") is not None]
-        row.update(status="done" if all(f["converged"] for f in frames) else "not converged",
-                   frames=len(frames), converged_frames=sum(f["converged"] for f in frames),
+        row.update(frames=len(frames), converged_frames=sum(f["converged"] for f in frames),
                    iterations=sum(f["iterations"] for f in frames),
                    cg_iterations=sum(f["cg_iterations"] for f in frames),
                    time_s=sum(f["time_s"] for f in frames),
@@ -155,6 +185,8 @@ def run_case(base: str, params: dict, out: str, plot: str, threads: int) -> dict
                    error_estimate_s=sum(f.get("error_estimate_s", 0.0) for f in frames),
                    max_error_estimate=max(estimates) if estimates else "")
         row["plot_value"] = _plot_value(plot, frames, row)
+        # finished only once everything the row reports is in it
+        row["status"] = "done" if all(f["converged"] for f in frames) else "not converged"
     except Exception as e:  # recorded: the sweep goes on
         row["error"] = f"{type(e).__name__}: {e}"
         with open(os.path.join(out, "error.txt"), "w") as f:
@@ -232,6 +264,7 @@ def sweep(sweep_file, out: str, *, scheduler: str | None = None, workers: int | 
         raise SweepError("two cases have the same parameters; each case must differ")
     rows = {i: previous[i] for i in ids if i in previous and previous[i].get("status") in FINISHED}
     todo = [(i, c) for i, c in zip(ids, cases) if i not in rows]
+    check_cases(spec["base"], [c for _, c in todo], spec["plot"])
     progress(f"emu sweep: {len(cases)} case(s), {len(rows)} done already, {len(todo)} to run; "
              f"{threads} solver thread(s) per case")
     if todo:
