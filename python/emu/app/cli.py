@@ -256,9 +256,12 @@ def _run(args):
         spec.solver["accuracy"] = args.accuracy
     if args.no_preview:
         spec.output["preview"] = False
+    if args.usd:
+        spec.output["usd"] = True
     log = run_scene(spec, args.out)
     wrote = [w for w, on in (("frame_*.vtu + series.pvd (ParaView)", spec.output.get("vtu", True)),
                              ("frame_*.obj (Blender)", spec.output.get("obj", True)), ("log.json", True),
+                             ("run.usd (USD)", spec.output["usd"] and log["frames"]),
                              ("preview.png", spec.output["preview"] and log["frames"])) if on]
     print(f"wrote {args.out or spec.output['dir']}: {', '.join(wrote)}")
     if log["interrupted"]:
@@ -351,6 +354,8 @@ def main(argv=None):
     r.add_argument("--accuracy", type=float, default=None,
                    help="override the scene file's solver.accuracy (vertex error to FEM wanted, e.g. 0.01)")
     r.add_argument("--no-preview", action="store_true", help="do not write preview.png (output.preview = false)")
+    r.add_argument("--usd", action="store_true", help="also write run.usd, one animated USD stage (output.usd = "
+                                                      "true; needs pip install emu[usd])")
     r.set_defaults(func=_run)
     w = sub.add_parser("sweep", help="run many cases of a scene file (a grid or list of scene-file keys) on "
                                      "Dask: a local cluster or a scheduler; results.csv, one folder per case")
@@ -384,7 +389,7 @@ def main(argv=None):
     warnings.showwarning = _show_warning
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError, NotImplementedError, datasets.DatasetError) as e:
+    except (ValueError, FileNotFoundError, NotImplementedError, ImportError, datasets.DatasetError) as e:
         print(f"emu: error: {e}", file=sys.stderr)
         return 2
     finally:

@@ -2,7 +2,8 @@
 
 Outputs in the folder: frame_NNNN.vtu per frame and series.pvd (ParaView),
 frame_NNNN.obj surfaces (Blender), log.json (per-frame solver statistics),
-preview.png (up to eight frames, shaded, per-part colours). A run first
+preview.png (up to eight frames, shaded, per-part colours) and, asked for,
+run.usd (one animated USD stage: a prim per part, a time sample per frame). A run first
 removes what an earlier run wrote there (those names only). Ctrl-C stops after
 keeping every finished frame (and the series, log and preview).
 """
@@ -28,7 +29,7 @@ from .scenefile import SceneSpec
 __all__ = ["run_scene", "clear_run", "RUN_OUTPUTS"]
 
 # What a run writes into its folder (and a rerun removes first).
-RUN_OUTPUTS = re.compile(r"frame_\d{4,}\.(vtu|obj)|series\.pvd|log\.json|preview\.png")
+RUN_OUTPUTS = re.compile(r"frame_\d{4,}\.(vtu|obj)|series\.pvd|log\.json|preview\.png|run\.usd")
 PREVIEW_FRAMES = 8
 
 
@@ -81,6 +82,11 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
            "frames": [], "interrupted": False}
     pvd = []
     prev = None
+    usd = None
+    if spec.output.get("usd", False):
+        from ..io.usd import UsdWriter
+
+        usd = UsdWriter(os.path.join(out, "run.usd"), spec.scene, spec.dt)
     want_preview = spec.output.get("preview", True)
     picks = set(np.linspace(0, spec.frames - 1, min(PREVIEW_FRAMES, spec.frames)).round().astype(int).tolist())
     kept = {}
@@ -116,6 +122,9 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                                   "error_estimate_s": sol.error_estimate_time_s,
                                   "accuracy_reached": sol.accuracy_reached, "fem_corrected": sol.corrected,
                                   "inverted_tets": sol.inverted_tets, "contact": sol.contact})
+            if usd is not None:
+                usd.add_frame(k, sol.positions, {m: a / spec.scene.parts[m].max_activation
+                                                 for m, a in act.items() if m in spec.scene.parts})
             if want_preview and k in picks:
                 kept[k] = sol.positions.copy()
             if on_frame is not None:
@@ -141,6 +150,8 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
     finally:
         if pvd:
             write_pvd(os.path.join(out, "series.pvd"), pvd)
+        if usd is not None and usd.frames:
+            usd.save()
         with open(os.path.join(out, "log.json"), "w") as f:
             json.dump(log, f, indent=2, default=float)
         if want_preview and log["frames"]:

@@ -96,6 +96,7 @@
     vtu = true                   # a VTU per frame and a .pvd series (ParaView)
     obj = true                   # an OBJ surface per frame (Blender)
     preview = true               # preview.png: up to eight frames, shaded, per-part colours
+    usd = false                  # run.usd: one animated USD stage, a prim per part (needs emu[usd])
     view = "yz"                  # the preview's right and up axes (default: looking along the first
                                  # hinge, else along the mesh's thinnest side)
 
@@ -150,7 +151,7 @@ _SCHEMA = {
     "activation": "table of tables",
     "bones": "table of tables",
     "joints": "table of tables",
-    "output": {"dir": str, "vtu": bool, "obj": bool, "preview": bool, "view": str},
+    "output": {"dir": str, "vtu": bool, "obj": bool, "preview": bool, "view": str, "usd": bool},
 }
 _BONE_KEYS = {"fixed": bool, "acap_weight": float, "joint_stiffness": float, "axis": list, "centre": list,
               "angle": list, "interpolation": str}
@@ -170,7 +171,7 @@ class SceneSpec:
     curves: dict                          # muscle name -> Curve
     bones: dict = field(default_factory=dict)  # scripted bone -> (axis (3,), centre (3,), angle Curve)
     output: dict = field(default_factory=lambda: {"dir": "emu_run", "vtu": True, "obj": True, "preview": True,
-                                                  "view": None})
+                                                  "view": None, "usd": False})
     source: str = ""
 
     def bone_poses(self, frame: int) -> dict:
@@ -412,7 +413,7 @@ def load_scene_file(path) -> SceneSpec:
             scene.add_joint(b[0], b[1], spec["centre"], spec.get("axis"))
         except ValueError as e:
             raise SceneFileError(f"joints.{name}: {e}") from None
-    output = {"dir": "emu_run", "vtu": True, "obj": True, "preview": True, "view": None}
+    output = {"dir": "emu_run", "vtu": True, "obj": True, "preview": True, "view": None, "usd": False}
     output.update(data.get("output", {}))
     if output["view"] is not None:
         v = output["view"]

@@ -9,7 +9,7 @@ import numpy as np
 
 from .obj import boundary_faces
 
-__all__ = ["contact_sheet", "angle_activation_plot", "default_view"]
+__all__ = ["contact_sheet", "angle_activation_plot", "default_view", "muscle_colour"]
 
 PART_COLOURS = {"bone": (0.93, 0.90, 0.80), "tendon": (0.85, 0.85, 0.95), "muscle": (0.80, 0.35, 0.35)}
 
@@ -23,6 +23,17 @@ def _pyplot():
     return plt
 
 
+# muscles from pale (relaxed) to deep red (fully active)
+MUSCLE_RELAXED = np.array([0.93, 0.75, 0.72])
+MUSCLE_ACTIVE = np.array([0.70, 0.05, 0.05])
+
+
+def muscle_colour(a):
+    """RGB of a muscle at normalised activation a (scalar or (k,) -> (3,) or (k, 3))."""
+    a = np.clip(np.asarray(a, dtype=np.float64), 0.0, 1.0)
+    return MUSCLE_RELAXED + a[..., None] * (MUSCLE_ACTIVE - MUSCLE_RELAXED)
+
+
 def _face_colours(scene, faces_tet, activation_of_tet):
     kinds = np.empty(len(scene.tets), object)
     for p in scene.parts.values():
@@ -30,10 +41,7 @@ def _face_colours(scene, faces_tet, activation_of_tet):
     col = np.array([PART_COLOURS[k] for k in kinds[faces_tet]])
     a = activation_of_tet[faces_tet]
     muscle = kinds[faces_tet] == "muscle"
-    # muscles from pale (relaxed) to deep red (fully active)
-    pale = np.array([0.93, 0.75, 0.72])
-    deep = np.array([0.70, 0.05, 0.05])
-    col[muscle] = pale + np.clip(a[muscle], 0, 1)[:, None] * (deep - pale)
+    col[muscle] = muscle_colour(a[muscle])
     return col
 
 
