@@ -80,13 +80,13 @@ def test_emu_solve_a_labelled_mesh(tmp_path):
     out = tmp_path / "sol.vtu"
     # no fibre cell data: the loader needs the Laplace field (or a direction), and
     # says how to ask for it on the command line; asked for, it solves
-    r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--out", str(out))
+    r = emu_cli("solve", str(mesh), "--absolute-activation", "belly=1e4", "--out", str(out))
     assert r.returncode == 2 and "no 'fiber' cell data" in r.stderr and "--fibers belly=laplace" in r.stderr, \
         r.stdout + r.stderr
-    r = emu_cli("solve", str(mesh), "--fibers", "belly=laplace", "--activation", "belly=1e4", "--method", "fem")
+    r = emu_cli("solve", str(mesh), "--fibers", "belly=laplace", "--absolute-activation", "belly=1e4", "--method", "fem")
     assert r.returncode == 0, r.stdout + r.stderr
     emu.io.write(mesh, m.points, m.tets, cell_data={"part": part, "fiber": np.tile([0.0, 0.0, 1.0], (len(m.tets), 1))})
-    r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--method", "fem", "--out", str(out))
+    r = emu_cli("solve", str(mesh), "--absolute-activation", "belly=1e4", "--method", "fem", "--out", str(out))
     assert r.returncode == 0, r.stdout + r.stderr
     sol = meshio.read(out)
     assert (tmp_path / "sol.png").stat().st_size > 5_000 and "wrote " + str(tmp_path / "sol.png") in r.stdout
@@ -95,8 +95,17 @@ def test_emu_solve_a_labelled_mesh(tmp_path):
     np.testing.assert_array_equal(act[s.parts["proximal"].tets], 0.0)
     assert np.abs(sol.point_data["displacement"]).max() > 1e-3
     assert "hint" not in r.stdout          # FEM is the faster method at this size: no hint
-    r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--method", "emu")
+    r = emu_cli("solve", str(mesh), "--absolute-activation", "belly=1e4", "--method", "emu")
     assert r.returncode == 0 and "hint: at " in r.stdout and "method='fem'" in r.stdout, r.stdout
+    # --activation is a fraction of the muscle's maximum, as in scene files (the
+    # belly's is 1e5): 0.1 is the 1e4 above; an absolute number there is refused
+    out2 = tmp_path / "normalised.vtu"
+    r = emu_cli("solve", str(mesh), "--activation", "belly=0.1", "--method", "fem", "--out", str(out2), "--no-preview")
+    assert r.returncode == 0, r.stdout + r.stderr
+    np.testing.assert_allclose(np.asarray(meshio.read(out2).cell_data["activation"][0]).ravel(), act)
+    assert not (tmp_path / "normalised.png").exists()
+    r = emu_cli("solve", str(mesh), "--activation", "belly=1e4", "--method", "fem")
+    assert r.returncode == 2 and "--absolute-activation belly=10000" in r.stderr, r.stderr
 
 
 def test_emu_info_on_a_scene_file(tmp_path):
@@ -170,7 +179,7 @@ def test_cli_messages_a_user_can_act_on(tmp_path):
     r = emu_cli("run", str(mesh))
     assert r.returncode == 2 and "is a mesh, not a scene file" in r.stderr and f"emu solve {mesh}" in r.stderr, r.stderr
     r = emu_cli("solve", str(mesh), "--kind", "floor=bone", "roof=bone", "--fibers", "belly=0,0,1", "--weld",
-                "--activation", "belly=1e3", "--method", "fem")
+                "--absolute-activation", "belly=1e3", "--method", "fem")
     assert r.returncode == 0, r.stdout + r.stderr
     warnings_ = [line for line in r.stderr.splitlines() if line.strip()]
     assert any(w.startswith("emu: warning: ") and "lies on bone 'floor'" in w for w in warnings_), r.stderr

@@ -451,3 +451,14 @@ def test_return_to_rest_converges():
         down = solver.solve({"belly": 0.0}, initial=up)
         assert down.converged, (method, down.status)
         assert emu.vertex_error(down, s.points) < 1e-5, method
+
+
+def test_emu_solve_takes_what_solver_solve_takes():
+    """emu.solve passes pin_positions (and the rest) to Solver.solve: moved pins
+    land where asked, with the same answer as the Solver."""
+    s, m = small_scene(2)
+    moved = s.points[s.pinned] + [0.0, 0.0, 0.05]
+    one = emu.solve(s, {"belly": 0.2}, "fem", normalized=True, pin_positions=moved)
+    two = emu.Solver(s, "fem").solve({"belly": 0.2}, normalized=True, pin_positions=moved)
+    np.testing.assert_allclose(one.positions[s.pinned], moved, atol=1e-12)
+    np.testing.assert_allclose(one.positions, two.positions, atol=1e-10)

@@ -748,8 +748,12 @@ class Solver:
 
 
 def solve(scene: Scene, activation=None, method: str = "emu", *, normalized: bool = False, gravity=None,
-          bone_poses=None, initial=None, on_iteration=None, record_iterates: bool = False, **options) -> Solution:
-    """Build a Solver for ``scene`` and solve once. options: see Solver."""
+          pin_positions=None, bone_poses=None, initial=None, on_iteration=None, record_iterates: bool = False,
+          **options) -> Solution:
+    """Build a Solver for ``scene`` and solve once: Solver(scene, method,
+    **options).solve(...) with the same arguments as Solver.solve (activation
+    absolute, or fractions of each muscle's maximum with normalized=True)."""
     return Solver(scene, method, **options).solve(activation, normalized=normalized, gravity=gravity,
-                                                  bone_poses=bone_poses, initial=initial, on_iteration=on_iteration,
+                                                  pin_positions=pin_positions, bone_poses=bone_poses,
+                                                  initial=initial, on_iteration=on_iteration,
                                                   record_iterates=record_iterates)

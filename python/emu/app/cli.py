@@ -3,7 +3,8 @@
     emu demo [--out DIR] [--resolution R] [--frames N] [--alpha A] [--no-fem] [--threads T]
     emu compare [--out DIR] [--tets N] [--threads T] [--woodbury]
     emu solve MESH --activation NAME=A [NAME=A ...] [--free-bones BONE ...] [--method emu|fem] [--accuracy E]
-              [--out FILE.vtu]
+              [--out FILE.vtu]     (A: a fraction of the muscle's maximum, as in scene files;
+                                    --absolute-activation NAME=A for absolute values)
     emu run SCENE.toml [--out DIR] [--accuracy E]
     emu sweep SWEEP.toml --out DIR [--scheduler ADDRESS] [--workers N] [--threads T]
     emu info [MESH]
@@ -157,17 +158,36 @@ def _compare(args):
     return 0 if all(s.converged for s in sols if s.settings.get("step") != "woodbury") else 1
 
 
-def _parse_activation(items):
+def _parse_activation(items, option="--activation"):
     act = {}
     for it in items or []:
         if "=" not in it:
-            raise SystemExit(f"--activation expects NAME=VALUE, got {it!r}")
+            raise SystemExit(f"{option} expects NAME=VALUE, got {it!r}")
         k, v = it.split("=", 1)
         try:
             act[k] = float(v)
         except ValueError:
-            raise SystemExit(f"--activation {k}: {v!r} is not a number") from None
+            raise SystemExit(f"{option} {k}: {v!r} is not a number") from None
     return act
+
+
+def _activation(scene, args) -> dict:
+    """{muscle: absolute a} from --activation (fractions of each muscle's
+    maximum, as scene files take them) and --absolute-activation."""
+    normalised = _parse_activation(args.activation)
+    absolute = _parse_activation(args.absolute_activation, "--absolute-activation")
+    for name, v in normalised.items():
+        if name in absolute:
+            raise ValueError(f"muscle '{name}' is given by both --activation and --absolute-activation; give one")
+        if name not in scene.muscles:
+            raise ValueError(f"--activation: no muscle named '{name}' (muscles: {', '.join(scene.muscles) or 'none'})")
+        if not 0.0 <= v <= 1.0:
+            raise ValueError(f"--activation {name}={v:g}: a fraction of the muscle's maximum activation "
+                             f"({scene.parts[name].max_activation:g}) between 0 and 1; for an absolute value use "
+                             f"--absolute-activation {name}={v:g}")
+    out = {name: v * scene.parts[name].max_activation for name, v in normalised.items()}
+    out.update(absolute)
+    return out
 
 
 def _parse_parts(kinds, fibers, weld=False) -> dict:
@@ -223,7 +243,7 @@ def _solve(args):
     scene = load_scene(mesh_path(args.mesh), free_bones=args.free_bones or (),
                        **_parse_parts(args.kind, args.fibers, args.weld))
     print(scene)
-    act = _parse_activation(args.activation)
+    act = _activation(scene, args)
     kw = dict(alpha=args.alpha, step=args.step) if args.method == "emu" else {}
     if args.accuracy is not None:
         kw["accuracy"] = args.accuracy
@@ -334,7 +354,10 @@ def main(argv=None):
     s.add_argument("mesh", help="a labelled mesh file, or a research scene name (" + ", ".join(datasets.names()) + ")")
     s.add_argument("--free-bones", nargs="*", metavar="BONE", help="bones the muscles move")
     _part_options(s)
-    s.add_argument("--activation", nargs="*", help="NAME=VALUE absolute activations")
+    s.add_argument("--activation", nargs="*", metavar="NAME=A",
+                   help="activations as fractions (0-1) of each muscle's maximum, as in scene files")
+    s.add_argument("--absolute-activation", nargs="*", metavar="NAME=A",
+                   help="absolute activations (the stress a fully shortened fibre adds, in the mesh's units)")
     s.add_argument("--method", choices=["emu", "fem"], default="emu")
     s.add_argument("--step", choices=["newton-krylov", "woodbury", "lbfgs"], default="newton-krylov")
     s.add_argument("--alpha", type=float, default=None,
