@@ -3,6 +3,8 @@
 #   bash run.sh demo [emu demo options]   install what is missing, then run the demo
 #   bash run.sh test                      install what is missing, then C++ tests (ctest) and pytest
 #   bash run.sh setup                     only install
+#   bash run.sh docs                      the documentation site (MkDocs) into site/; --strict: a broken
+#                                         link or reference fails it
 #   bash run.sh sanitize                  the C++ core, its tests and a subset of the Python tests
 #                                         under ASan + UBSan (CMakePresets.json)
 set -euo pipefail
@@ -78,5 +80,9 @@ case "$cmd" in
   sanitize) setup; sanitize "$@" ;;
   demo) setup; emu demo "$@" ;;
   test) setup; cpp_tests; "$PY" -m pytest -q tests "$@" ;;
-  *) echo "usage: bash run.sh [setup|demo|test|sanitize] [options]"; exit 2 ;;
+  docs)
+    "$PY" -m pip install -q --disable-pip-version-check "mkdocs>=1.6" \
+      "mkdocstrings[python]>=0.26" 2>&1 | grep -v -i "warning" || true
+    "$PY" -m mkdocs build --strict "$@" ;;
+  *) echo "usage: bash run.sh [setup|demo|test|sanitize|docs] [options]"; exit 2 ;;
 esac

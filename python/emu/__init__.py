@@ -22,7 +22,7 @@ from .solve import AccuracyWarning, NeutralModeWarning, Solution, Solver, solve
 from .bones import bone_angle, bone_motion, rigid_fit, signed_angle
 from .contact import ContactWarning
 from .app.sweep import sweep
-from . import activation, bones, contact, datasets, fibers, geometry, io, joints, lowering, meshes, poses, run, scenefile, scenes
+from . import activation, anatomy, bones, contact, datasets, fibers, geometry, io, joints, lowering, meshes, poses, run, scenefile, scenes
 
 __all__ = ["Scene", "Part", "Joint", "MeshWarning", "lame", "Solver", "Solution", "solve", "rotation", "pose_about",
            "io", "meshes", "scenes", "datasets", "fibers", "info", "vertex_error", "error_history", "time_to_error", "bbox_diagonal", "inverted_tets", "bone_angle", "bone_motion", "rigid_fit",
