@@ -45,28 +45,28 @@ def test_error_vs_time_small(tmp_path):
 
 
 def test_error_estimate_small():
-    out = run(BENCH / "error_estimate.py", "--scenes", "fusiform_r3", "--alphas", "100", "--variants")
+    out = run(BENCH / "studies" / "error_estimate.py", "--scenes", "fusiform_r3", "--alphas", "100", "--variants")
     assert "0 case(s) outside [0.5, 2]" in out
 
 
 def test_accuracy_small():
-    out = run(BENCH / "accuracy.py", "--scenes", "fusiform_r3", "--fractions", "0.1")
+    out = run(BENCH / "studies" / "accuracy.py", "--scenes", "fusiform_r3", "--fractions", "0.1")
     assert "| fusiform_r3 | fem |" in out and "| fusiform_r3 | " in out.split("against the strict")[1]
 
 
 def test_solve_times_small():
-    out = run(BENCH / "solve_times.py", "--scenes", "fusiform_r3", "--repeats", "1", "--emu-iterations", "3")
+    out = run(BENCH / "studies" / "solve_times.py", "--scenes", "fusiform_r3", "--repeats", "1", "--emu-iterations", "3")
     assert "| fusiform_r3 | fem |" in out and "| fusiform_r3 | emu | 3 /" in out
 
 
 def test_recycling_small():
-    out = run(BENCH / "recycling.py", "--scenes", "neck_r2")
+    out = run(BENCH / "studies" / "recycling.py", "--scenes", "neck_r2")
     row = [line for line in out.splitlines() if line.startswith("| neck_r2 |")][0]
     assert float(row.split("|")[-2]) < 1e-5      # the same answer with and without recycling
 
 
 def test_features_small():
-    out = run(BENCH / "features.py", "--resolution", "2", "--arm-resolution", "1")
+    out = run(BENCH / "studies" / "features.py", "--resolution", "2", "--arm-resolution", "1")
     rows = {line.split("|")[1].strip(): line for line in out.splitlines() if line.startswith("| ") and "---" not in line}
     assert "bone" not in rows["pinned muscle"] and "Schur" in rows["+ Schur preconditioner"]
     assert "error estimate: Hessian factor" in rows["+ error estimate"]
@@ -77,12 +77,12 @@ def test_hard_isometric_small():
     from conftest import shared_raw
 
     shared_raw()
-    out = run(BENCH / "hard_isometric.py", "--activations", "2e3", "--activation", "2e3", "--alphas", "1000")
+    out = run(BENCH / "studies" / "hard_isometric.py", "--activations", "2e3", "--activation", "2e3", "--alphas", "1000")
     assert "| 2000 |" in out and "| 1000 |" in out and "| yes |" in out   # FEM from EMU's answer: the same equilibrium
 
 
 def test_fem_baselines_small():
-    out = run(BENCH / "fem_baselines.py", "--scenes", "fusiform_r3", "--caps", "10", "--frames", "3",
+    out = run(BENCH / "studies" / "fem_baselines.py", "--scenes", "fusiform_r3", "--caps", "10", "--frames", "3",
               "--resolution", "1")
     rows = [line for line in out.splitlines() if line.startswith("| fusiform_r3 |")]
     assert len(rows) == 2 and "factorisation per iteration" in rows[0] and "PCG cap 10" in rows[1]
@@ -94,7 +94,7 @@ def test_fem_baselines_small():
 
 
 def test_variants_small():
-    out = run(BENCH / "variants.py", "--scenes", "fusiform_r3", "--alphas", "300", "--variant", "modes=12",
+    out = run(BENCH / "studies" / "variants.py", "--scenes", "fusiform_r3", "--alphas", "300", "--variant", "modes=12",
               "--variant", "preconditioner='schur',preconditioner_refresh=1000")
     rows = [line for line in out.splitlines() if line.startswith("| fusiform_r3 |")]
     assert len(rows) == 2 and "modes=12" in rows[0] and "preconditioner=schur" in rows[1]
@@ -102,7 +102,7 @@ def test_variants_small():
 
 
 def test_fem_correction_small():
-    out = run(BENCH / "fem_correction.py", "--scenes", "fusiform_r3")
+    out = run(BENCH / "studies" / "fem_correction.py", "--scenes", "fusiform_r3")
     row = next(line for line in out.splitlines() if line.startswith("| fusiform_r3 |"))
     cells = [c.strip() for c in row.split("|")[1:-1]]
     emu_error = float(cells[2])
@@ -118,7 +118,7 @@ def test_stability_table_small():
 
 
 def test_eigen_filter_table_small():
-    out = run(BENCH / "eigen_filter.py", "--cases", "poisson_4999")
+    out = run(BENCH / "studies" / "eigen_filter.py", "--cases", "poisson_4999")
     rows = [line.split("|") for line in out.splitlines() if line.startswith("| poisson_4999 |")]
     assert len(rows) == 6 and all(r[4].strip() == "converged" for r in rows)
     newton = {r[3].strip(): int(r[5].split("/")[0]) for r in rows if r[2].strip() == "fem"}
@@ -127,7 +127,7 @@ def test_eigen_filter_table_small():
 
 
 def test_accuracy_mode_table_small():
-    out = run(BENCH / "accuracy_mode.py", "--scenes", "fusiform_r3")
+    out = run(BENCH / "studies" / "accuracy_mode.py", "--scenes", "fusiform_r3")
     row = next(line for line in out.splitlines() if line.startswith("| fusiform_r3 |"))
     cells = [c.strip() for c in row.split("|")[1:-1]]
     resolve, corrected = cells[4], cells[5]
@@ -139,7 +139,7 @@ def test_accuracy_mode_table_small():
 
 
 def test_contact_small(tmp_path):
-    out = run(BENCH / "contact.py", "--resolution", "1", "--frames", "4", "--out", tmp_path)
+    out = run(BENCH / "studies" / "contact.py", "--resolution", "1", "--frames", "4", "--out", tmp_path)
     rows = [line.split("|") for line in out.splitlines() if line.startswith("| 264 |")]
     through = {(r[2].strip(), r[3].strip()): r[9].strip() for r in rows}
     assert through[("fem", "on")] == through[("emu", "on")] == "0 of 4"      # contact stops it
@@ -150,12 +150,12 @@ def test_contact_small(tmp_path):
 
 def test_sweep_small(tmp_path):
     pytest.importorskip("dask.distributed")
-    out = run(BENCH / "sweep.py", "--cases", "2", "--resolution", "1", "--frames", "2", "--out", tmp_path)
+    out = run(BENCH / "studies" / "sweep.py", "--cases", "2", "--resolution", "1", "--frames", "2", "--out", tmp_path)
     assert "| Dask local cluster, 2 workers" in out and "same answers (last-frame elbow angle) both ways: True" in out
 
 
 def test_demo_phases_small():
-    out = run(BENCH / "demo_phases.py", "--resolution", "2", "--frames", "4")   # (with 3 frames every activation is 0)
+    out = run(BENCH / "studies" / "demo_phases.py", "--resolution", "2", "--frames", "4")   # (with 3 frames every activation is 0)
     rows = {line.split("|")[1].strip(): line.split("|") for line in out.splitlines() if line.startswith("| f")
             or line.startswith("| e")}
     assert set(rows) == {"fem", "emu"}
@@ -168,7 +168,7 @@ def test_demo_phases_small():
 
 
 def test_accuracy_variants_small():
-    out = run(BENCH / "accuracy_variants.py", "--scenes", "fusiform_r3", "--variant", "cg_forcing_min=0",
+    out = run(BENCH / "studies" / "accuracy_variants.py", "--scenes", "fusiform_r3", "--variant", "cg_forcing_min=0",
               "--variant", "", "--demo", "--demo-resolution", "2", "--demo-frames", "4")
     blocks = out.split("\nvariant ")[1:]
     assert len(blocks) == 2 and "cg_forcing_min" in blocks[0] and blocks[1].startswith("defaults")
@@ -182,7 +182,7 @@ def test_accuracy_variants_small():
 
 
 def test_targets_small():
-    out = run(BENCH / "targets.py", "--scenes", "fusiform_r3", "arm_r3", "--alphas", "100", "300")
+    out = run(BENCH / "studies" / "targets.py", "--scenes", "fusiform_r3", "arm_r3", "--alphas", "100", "300")
     rows = {line.split("|")[1].strip(): line for line in out.splitlines() if line.startswith("| fusiform_r3")
             or line.startswith("| arm_r3")}
     assert set(rows) == {"fusiform_r3", "arm_r3"}

@@ -1,7 +1,7 @@
 """EMU's error estimate (Solution.error_estimate): the linearised FEM correction
 at EMU's positions, against the true vertex error to the converged FEM answer
 on small scenes over two decades of alpha (the full table over the shipped
-scenes is bench/error_estimate.py, quoted in docs/DESIGN.md)."""
+scenes is bench/studies/error_estimate.py, quoted in docs/DESIGN.md)."""
 from __future__ import annotations
 
 import numpy as np

@@ -173,7 +173,7 @@ class ContactTerm:
         self._key = None
         self._collisions = None
         self.evaluations = 0
-        # seconds spent per kind of call (bench/contact.py reports them)
+        # seconds spent per kind of call (bench/studies/contact.py reports them)
         self.seconds = dict.fromkeys(("collisions", "energy", "gradient", "hessian", "ccd"), 0.0)
 
     def _rest_gap(self, points, reach) -> float:

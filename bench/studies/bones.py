@@ -5,7 +5,7 @@ For each scene: FEM (rigid bones, exponential-map Newton) and EMU
 speed ratio, the moved bone's angle (or translation) from each and EMU's
 vertex error to FEM over the bounding-box diagonal, as a Markdown table.
 
-    python bench/bones.py [--threads T] [--alpha A] [--arm-resolutions 3 5]
+    python bench/studies/bones.py [--threads T] [--alpha A] [--arm-resolutions 3 5]
 """
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ FEM's Newton steps from EMU's answer to FEM's equilibrium (and whether it is
 the same: the energy), and how far along the way one exact Newton step of
 FEM from EMU's answer gets (1 in a quadratic valley, 1/3 in a quartic one).
 
-    python bench/hard_isometric.py [--activations 2e3 5e3 1e4 2e4] [--activation 2e4] [--alphas 10 100 1000 1e4]
+    python bench/studies/hard_isometric.py [--activations 2e3 5e3 1e4 2e4] [--activation 2e4] [--alphas 10 100 1000 1e4]
 """
 from __future__ import annotations
 
@@ -20,6 +20,9 @@ import warnings
 import numpy as np
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES
 
 

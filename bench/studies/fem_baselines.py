@@ -9,7 +9,7 @@
    lagged factor and FEM with accuracy 0.01, with each method's seconds per
    phase (Solution.phase_times) summed over the frames.
 
-    python bench/fem_baselines.py [--scenes fusiform_20k arm_r5 realistic_biceps simple_joint_free]
+    python bench/studies/fem_baselines.py [--scenes fusiform_20k arm_r5 realistic_biceps simple_joint_free]
         [--caps 10 25 50] [--threads 1] [--frames 25] [--resolution 3]
 """
 from __future__ import annotations
@@ -18,6 +18,9 @@ import argparse
 import collections
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run
 from emu.app.demo import demo_spec
 

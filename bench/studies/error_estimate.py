@@ -5,8 +5,8 @@ For each scene: FEM to a tight tolerance (the reference), then EMU at each
 alpha; prints a Markdown table of the true vertex error, the estimate, their
 ratio (the target band is [0.5, 2]), EMU's solve time and the estimate's time.
 
-    python bench/error_estimate.py [--scenes fusiform simple_joint ...] [--alphas 10 30 100 300 1000]
-    python bench/error_estimate.py --variants ...   # estimate / true of each way to take the correction
+    python bench/studies/error_estimate.py [--scenes fusiform simple_joint ...] [--alphas 10 30 100 300 1000]
+    python bench/studies/error_estimate.py --variants ...   # estimate / true of each way to take the correction
 
 --variants adds, per case, estimate / true for one Newton step with the exact
 matrix (where definite, else filtered), with the filtered one, with the
@@ -19,6 +19,9 @@ import time
 import warnings
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES
 
 

@@ -2,7 +2,7 @@
 cases run one after another in this process (no Dask), 1 solver thread per
 case, so both use the same per-case work and the cluster uses both cores.
 
-    python bench/sweep.py [--cases 8] [--resolution 3] [--frames 12] [--out /tmp/emu_sweep_bench]
+    python bench/studies/sweep.py [--cases 8] [--resolution 3] [--frames 12] [--out /tmp/emu_sweep_bench]
 """
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ import shutil
 import time
 
 import emu
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import start_run
 from emu.app.sweep import case_id, load_sweep, run_case
 

@@ -4,7 +4,7 @@ and off, on the hard cases: the near-incompressible stress case (Poisson
 0.4999, a saddle: docs/stability.md) and big_muscle with both bones fixed at
 a = 1.33e4 (docs/DESIGN.md, "Open problem: hard isometric cases").
 
-    python bench/eigen_filter.py [--cases poisson_4999 big_muscle_isometric] [--threads 1]
+    python bench/studies/eigen_filter.py [--cases poisson_4999 big_muscle_isometric] [--threads 1]
 
 EMU at alpha = 100 mu to the strict tolerance, no error estimate; FEM
 Newton to its strict tolerance; every solve capped at 3000 iterations.
@@ -16,6 +16,9 @@ import time
 import warnings
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run
 from stability import pinned_muscle
 

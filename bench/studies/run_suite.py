@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Run emu_vs_fem.py over mesh sizes and thread counts; print a markdown table.
 
-    python bench/run_suite.py --tets 5000 20000 80000 --threads 1 2 [--out bench/results]
+    python bench/studies/run_suite.py --tets 5000 20000 80000 --threads 1 2 [--out bench/results]
 
 Each run is a separate process (so thread settings and memory start clean) and
 writes its JSON into --out; the table is printed at the end, ready to paste

@@ -4,7 +4,7 @@ its default tolerance, EMU at a fixed alpha capped at a fixed number of
 Newton steps (so both sides of a change do the same work). The phase
 columns (Solution.phase_times, of the best repeat) say where the time went.
 
-    python bench/solve_times.py [--scenes realistic_biceps fusiform_20k arm_r5] [--threads 1]
+    python bench/studies/solve_times.py [--scenes realistic_biceps fusiform_20k arm_r5] [--threads 1]
         [--repeats 3] [--emu-iterations 10]
 """
 from __future__ import annotations
@@ -12,6 +12,9 @@ from __future__ import annotations
 import argparse
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run
 
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """EMU against the FEM reference on the procedural fusiform muscle.
 
-    python bench/emu_vs_fem.py --tets 20000 [--threads 2] [--alpha 100] [--json out.json]
+    python bench/studies/emu_vs_fem.py --tets 20000 [--threads 2] [--alpha 100] [--json out.json]
 
 Runs FEM Newton and EMU (both step types) on the same scene and activation;
 prints and writes as JSON: sizes, threads, BLAS, setup and solve seconds per

@@ -1,7 +1,7 @@
 """Accuracy as the knob: the step-size stopping rule and accuracy= against the
 strict tolerance, per scene, for both methods.
 
-    python bench/accuracy.py [--scenes fusiform_r3 simple_joint_free big_muscle_free arm_r3 neck_r2]
+    python bench/studies/accuracy.py [--scenes fusiform_r3 simple_joint_free big_muscle_free arm_r3 neck_r2]
                              [--target 0.01] [--fractions 0.3 0.1 0.03]
 
 Part 1 (--fractions): each method at a fixed alpha (300 mu for EMU) stopped
@@ -20,6 +20,9 @@ import warnings
 import numpy as np
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES
 from emu import _core
 

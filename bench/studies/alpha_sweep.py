@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """EMU's error against run time as alpha varies, next to FEM's run time.
 
-    python bench/alpha_sweep.py [--tets 8000] [--alphas 10 30 100 300 1000 3000] [--json out.json]
+    python bench/studies/alpha_sweep.py [--tets 8000] [--alphas 10 30 100 300 1000 3000] [--json out.json]
 
 alpha is relative to the muscle's shear modulus. Error: largest vertex
 distance to the converged FEM answer over the bounding-box diagonal.

@@ -2,7 +2,7 @@
 directions (Solver(recycled_directions=N): directions of CG solves far longer
 than the step before join the bone coarse space of the later steps).
 
-    python bench/recycling.py [--scenes realistic_biceps simple_joint_free ...] [--keep 4] [--alpha 100]
+    python bench/studies/recycling.py [--scenes realistic_biceps simple_joint_free ...] [--keep 4] [--alpha 100]
 """
 from __future__ import annotations
 
@@ -11,6 +11,9 @@ import time
 import warnings
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES
 
 

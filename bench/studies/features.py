@@ -3,7 +3,7 @@ the structures built (Solver.structures()) of a pinned muscle against the same
 scene with one feature switched on, and of the arm with its forearm fixed
 against moving. Each case runs in its own process (peak RSS is per process).
 
-    python bench/features.py [--resolution 6] [--arm-resolution 4]
+    python bench/studies/features.py [--resolution 6] [--arm-resolution 4]
 """
 from __future__ import annotations
 

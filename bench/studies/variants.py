@@ -3,7 +3,7 @@ converged FEM answer, and to converge, per scene and alpha, for Solver
 options given on the command line (one --variant per run, comma-separated
 key=value pairs, values parsed as Python literals where they can be).
 
-    python bench/variants.py --scenes fusiform_20k --alphas 300 \\
+    python bench/studies/variants.py --scenes fusiform_20k --alphas 300 \\
         --variant preconditioner='"woodbury"' --variant preconditioner='"schur"' \\
         --variant preconditioner='"schur"',preconditioner_refresh=1000 [--threads 1]
 """
@@ -13,6 +13,9 @@ import argparse
 import ast
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run
 
 

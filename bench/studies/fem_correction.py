@@ -6,7 +6,7 @@ factor), each one's vertex error to the converged FEM answer and seconds.
 For the design question whether accuracy mode should return corrected
 positions instead of re-solving at a larger alpha (docs/DESIGN.md).
 
-    python bench/fem_correction.py [--scenes arm_r5 fusiform_20k realistic_biceps simple_joint_free big_muscle_free]
+    python bench/studies/fem_correction.py [--scenes arm_r5 fusiform_20k realistic_biceps simple_joint_free big_muscle_free]
         [--alpha 100] [--threads 1]
 """
 from __future__ import annotations
@@ -15,6 +15,9 @@ import argparse
 import time
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run
 
 

@@ -7,7 +7,7 @@ to the strict tolerance and FEM with accuracy=0.01. Seconds are solve + error
 estimate (EMU) or solve (FEM), 1 thread unless --threads; errors are to FEM
 converged to |g| <= 1e-9 |g0|.
 
-    python bench/accuracy_mode.py [--scenes arm_r5 fusiform_20k realistic_biceps ...] [--target 0.01]
+    python bench/studies/accuracy_mode.py [--scenes arm_r5 fusiform_20k realistic_biceps ...] [--target 0.01]
                                   [--emu-preconditioners constant-schur woodbury]
 
 With several --emu-preconditioners, the EMU columns repeat per preconditioner
@@ -19,6 +19,9 @@ import argparse
 import warnings
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run
 
 DEFAULT_SCENES = ["fusiform_r3", "fusiform_20k", "arm_r3", "arm_r5", "neck_r2", "simple_joint_free",

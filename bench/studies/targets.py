@@ -8,7 +8,7 @@ say what the target leaves: EMU's time budget (FEM's time over the target
 ratio), and how many CG iterations fit in it at today's cost per iteration
 once the setup and the per-step work are paid (negative: they alone exceed it).
 
-    python bench/targets.py [--scenes realistic_biceps arm_r5 fusiform_80k] [--alphas 100 300 1000]
+    python bench/studies/targets.py [--scenes realistic_biceps arm_r5 fusiform_80k] [--alphas 100 300 1000]
                             [--threads 1]
 
 EMU runs at each alpha given (error estimate off, as in error_vs_time.py);
@@ -21,6 +21,9 @@ import argparse
 import time
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run
 from error_vs_time import curve
 from emu.geometry import time_within

@@ -2,10 +2,10 @@
 per scene, Newton / CG counts, solve and estimate seconds, the alpha chosen,
 the estimate and the true vertex error to the converged FEM answer; with
 --demo also the demo's 25 warm-started frames (summed counts, largest error).
-Options as in bench/variants.py (one --variant per run, comma-separated
+Options as in bench/studies/variants.py (one --variant per run, comma-separated
 key=value pairs; an empty --variant '' is the defaults).
 
-    python bench/accuracy_variants.py --scenes fusiform_20k arm_r5 \\
+    python bench/studies/accuracy_variants.py --scenes fusiform_20k arm_r5 \\
         --variant cg_forcing_min=0 --variant '' [--demo [--demo-resolution 3 --demo-frames 25]] [--threads 1]
 """
 from __future__ import annotations
@@ -16,6 +16,9 @@ import warnings
 import numpy as np
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run
 from demo_phases import run_frames
 from emu.app.demo import demo_spec

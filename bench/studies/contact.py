@@ -14,8 +14,8 @@ estimate; then the same with accuracy mode's FEM correction forced on
 (fem_correction=True; off by default with contact). A PNG compares the
 frames with contact off and on.
 
-    python bench/contact.py [--resolution 2] [--frames 12] [--threads 1] [--out bench/contact]
-    python bench/contact.py --steps     # EMU's steps with contact on beam_on_bone, against FEM
+    python bench/studies/contact.py [--resolution 2] [--frames 12] [--threads 1] [--out bench/studies/contact]
+    python bench/studies/contact.py --steps     # EMU's steps with contact on beam_on_bone, against FEM
 """
 from __future__ import annotations
 
@@ -26,6 +26,8 @@ import time
 import numpy as np
 
 import emu
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import start_run
 from emu.contact import ContactSettings, ContactTerm
 from emu.io.plots import contact_sheet

@@ -4,13 +4,16 @@ and by EMU with the demo's settings (accuracy 0.01), each phase summed over
 the frames (Solution.phase_times), with Newton / CG counts and EMU's error
 estimate time (which the demo adds to EMU's total).
 
-    python bench/demo_phases.py [--resolution 3] [--frames 25] [--threads 1]
+    python bench/studies/demo_phases.py [--resolution 3] [--frames 25] [--threads 1]
 """
 from __future__ import annotations
 
 import argparse
 
 import emu
+import os
+import sys
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import start_run
 from emu.app.demo import demo_spec
 
