@@ -23,7 +23,7 @@ LAYERS = {
     # the scene, its parts and joints, the lowering to the C++ model, built-in scenes
     "model": {"parts", "joints", "contact", "scene", "lowering", "scenes"},
     # solving a scene and measuring a solution
-    "solve": {"accuracy", "advice", "solve", "bones"},
+    "solve": {"accuracy", "advice", "solve", "bones", "options"},
     # files in and out (never the solver)
     "io": {"io", "io.mesh", "io.vtk", "io.obj", "io.plots", "io.usd", "datasets", "author", "anatomy"},
     # the application: command line, scene files, runs, the demo

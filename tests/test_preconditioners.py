@@ -108,9 +108,12 @@ def test_strict_solves_have_no_cg_forcing_floor_and_bad_floors_are_refused():
     for bad in (-0.1, 1.0, float("nan"), True, "0.1"):
         with pytest.raises(ValueError, match="cg_forcing_min must lie in"):
             emu.Solver(scene, "emu", alpha=100, cg_forcing_min=bad)
-    for method, step in (("fem", "newton-krylov"), ("emu", "lbfgs"), ("emu", "woodbury")):
-        with pytest.raises(ValueError, match="cg_forcing_min is an option of EMU's Newton-Krylov step"):
-            emu.Solver(scene, method, step=step, cg_forcing_min=0.1)
+    with pytest.raises(ValueError, match="cg_forcing_min is an option of EMU only; leave it out for method='fem'"):
+        emu.Solver(scene, "fem", cg_forcing_min=0.1)
+    for step in ("lbfgs", "woodbury"):
+        with pytest.raises(ValueError, match=f"cg_forcing_min applies to EMU's newton-krylov step only; leave it "
+                                             f"out for step='{step}'"):
+            emu.Solver(scene, "emu", step=step, cg_forcing_min=0.1)
     opts = emu._core.EmuOptions()
     opts.alpha, opts.cg_forcing_min = 1e5, float("nan")   # the core refuses it too
     with pytest.raises(ValueError, match="cg_forcing_min must lie in"):

@@ -37,10 +37,13 @@ def test_position_tol_stops_within_its_distance_of_the_strict_answer(arm):
 
 def test_position_tol_is_emu_newton_krylov_strict_only(arm):
     # FEM, EMU's accuracy mode and the slowly converging steps keep their own tests
-    fem = emu.Solver(arm, "fem", rtol_grad=1e-14, position_tol=1e-3, noise_factor=0)
+    with pytest.raises(ValueError, match="position_tol is an option of EMU only"):
+        emu.Solver(arm, "fem", rtol_grad=1e-14, position_tol=1e-3, noise_factor=0)
+    with pytest.raises(ValueError, match="position_tol applies to EMU's newton-krylov step only"):
+        emu.Solver(arm, "emu", alpha=300, step="woodbury", position_tol=1e-3)
+    fem = emu.Solver(arm, "fem", rtol_grad=1e-14, noise_factor=0)
     assert fem.solve(ACT, normalized=True).status != STEP_STATUS
-    for solver in (fem, emu.Solver(arm, "emu", accuracy=0.01, position_tol=1e-3),
-                   emu.Solver(arm, "emu", alpha=300, step="woodbury", position_tol=1e-3)):
+    for solver in (fem, emu.Solver(arm, "emu", accuracy=0.01, position_tol=1e-3)):
         assert solver.settings["position_tol"] is None   # not applied
     assert emu.Solver(arm, "emu", alpha=300).settings["position_tol"] == 1e-7
 

@@ -57,12 +57,16 @@ def test_scene_file_solver_options_reach_the_solver(tmp_path):
     """The [solver] options added with the stress suite and accuracy mode's
     corrections are accepted and passed on to emu.Solver."""
     text = GOOD.replace('alpha = 100.0', 'accuracy = 0.01\nfem_correction = false\neigen_filter = "abs"\n'
-                        'negative_curvature = false\nrecycled_directions = 2')
+                        'recycled_directions = 2')
     spec = load_scene_file(write(tmp_path, text))
     solver = emu.Solver(spec.scene, **spec.solver)
     assert solver.settings["fem_correction"] is False and solver.settings["eigen_filter"] == "abs"
-    fem = emu.Solver(spec.scene, **{**spec.solver, "method": "fem", "fem_correction": True})
-    assert fem.settings["fem_correction"] is False   # an EMU option: FEM has none
+    # an option of the other method is an error naming it
+    with pytest.raises(ValueError, match="fem_correction is an option of EMU only; leave it out for method='fem'"):
+        emu.Solver(spec.scene, **{**spec.solver, "method": "fem"})
+    fem_text = GOOD.replace('method = "emu"\nalpha = 100.0', 'method = "fem"\nnegative_curvature = false')
+    fem_spec = load_scene_file(write(tmp_path, fem_text, "fem.toml"))
+    assert emu.Solver(fem_spec.scene, **fem_spec.solver).method == "fem"
     with pytest.raises(SceneFileError, match="solver.fem_correction"):
         load_scene_file(write(tmp_path, GOOD.replace('alpha = 100.0', 'fem_correction = "yes"'), "bad.toml"))
     # the stopping and CG options of later stops too

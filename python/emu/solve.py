@@ -16,6 +16,7 @@ from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, DEFAULT_ACC
 from .checks import inverted_tets
 from .contact import ContactTerm
 from .geometry import bbox_diagonal, deformation_gradients, tet_vertices, vertex_error
+from .options import OPTIONS, POSITION_TOL, check_options, options_text, solver_signature
 from .lowering import build_model, declared_joint_rows, declared_joint_world, model_tet_order
 from .poses import parse_pose
 from .runtime import set_threads
@@ -39,7 +40,7 @@ PRECONDITIONERS = ("woodbury", "schur", "constant-schur")
 # POSITION_TOL_GRAD |g_0|: with bones the gradient's round-off (the fit's
 # conditioning) can sit within a few times rtol_grad |g_0|, and the steps that
 # chase it change the answer in its 7th or 8th digit (docs/DESIGN.md, "The gradient's round-off").
-POSITION_TOL, POSITION_TOL_GRAD = 1e-7, 1e-3
+POSITION_TOL_GRAD = 1e-3
 # L-BFGS keeps its initial inverse (the Woodbury preconditioner) this many
 # steps: its curvature pairs make up for the lag (measured: docs/DESIGN.md)
 LBFGS_REFRESH = 20
@@ -177,121 +178,27 @@ class Solver:
     the ACAP matrix and its modes) happens once here, every ``solve`` reuses it.
 
     method        "emu" or "fem"
-    alpha         EMU's ACAP stiffness relative to the softest muscle's shear
-                  modulus (larger: closer to FEM, more iterations). Given
-                  without ``accuracy``: fixed, and EMU iterates to the strict
-                  tolerance. Neither given: accuracy = 0.01 (the default for
-                  the Newton-Krylov step), alpha chosen for it starting at 100
-    modes         k, number of ACAP modes in the Woodbury term (multiple of 3)
-    step          "newton-krylov" (default), "woodbury" (the paper's step) or "lbfgs"
-                  (L-BFGS with the Woodbury step as its initial inverse Hessian,
-                  ``lbfgs_memory`` pairs; measured against Newton-Krylov in docs/DESIGN.md)
-    rtol_grad     stop when |g| <= rtol_grad |g_0| ...
-    rtol_energy   ... and the last energy decrease <= rtol_energy x total decrease
-    position_tol  EMU Newton-Krylov without ``accuracy``: ... or when a full step moves no
-                  vertex by more than position_tol x the bounding-box diagonal, once |g| <=
-                  1e-3 |g_0| (the positions converged to about 7 digits; 0 turns it off;
-                  settings["position_tol"] is None where it does not apply)
-    noise_factor  ... or when |g| <= noise_factor x the gradient's round-off, measured in
-                  the endgame (|g| <= max(1e-3, 100 rtol_grad) |g_0|, and before a solve
-                  would stop as stalled) from the gradient at the iterate moved by one
-                  rounding (status "converged: the gradient is at its round-off level");
-                  0 turns it off. EMU with bones needs it: its fit's conditioning can bring
-                  the round-off within a few times rtol_grad |g_0| (docs/DESIGN.md)
-    max_iterations  per solve
-    preconditioner  Newton-Krylov's preconditioner: "woodbury" (the paper's approximation through
-                  k modes, no factorisation after setup), "schur" (exact inverse of the filtered
-                  Hessian through the position-space Schur complement: one factorisation per rebuild)
-                  or "constant-schur" (that inverse with the Schur complement replaced by a constant
-                  matrix of the ACAP matrix's form: one factorisation per alpha, no modes; fewer CG
-                  iterations on large meshes, measured in docs/DESIGN.md)
-    cg_model_decrease  Newton-Krylov: CG stops when its residual meets the forcing
-                  tolerance and the last iteration lowered the quadratic model by
-                  at most this fraction of its decrease so far, divided by the
-                  iteration count (Nash-Sofer's truncation test; 0.5 by default,
-                  0: the residual test alone; measured in docs/DESIGN.md)
-    cg_forcing_min  Newton-Krylov: a floor on CG's forcing term eta (CG stops at
-                  |r| <= eta |g|, eta = min(0.5, max(cg_forcing_min, sqrt(|g| / |g_0|)))
-                  by Eisenstat-Walker); None: sqrt(STEP_GRAD) = 0.1 with ``accuracy``
-                  (the forcing where its step test begins: an answer to an accuracy
-                  needs no superlinear endgame), else 0; at most the cap 0.5 acts
-                  (measured in docs/DESIGN.md)
-    preconditioner_refresh  rebuild the preconditioner every n steps (Newton-Krylov: sooner if CG
-                  slows); None: 3 for Newton-Krylov, 20 for L-BFGS (measured: docs/DESIGN.md)
-    exact_when_definite  use the unfiltered Hessian when it is definite (see README)
-    negative_curvature  FEM: near a stationary point where the exact Hessian is
-                  indefinite (a saddle: a symmetric shape about to buckle), add its most
-                  negative curvature direction to the step (scenes without movable bones;
-                  Solution.negative_curvature_steps counts them; docs/stability.md)
-    eigen_filter  where the element Hessian is not PSD: "clamp" its negative eigenvalues
-                  to 0 (default) or reflect them, "abs" (Chen et al. 2024; measured on
-                  the stress cases in docs/stability.md: not faster here)
-    bone_coarse_space  EMU with movable bones: add a coarse correction for the bones'
-                  rotations to the preconditioner (fewer CG iterations; docs/DESIGN.md)
-    recycled_directions  EMU with movable bones: keep the directions of up to this many
-                  CG solves that took far longer than the step before in that coarse
-                  correction (default 4; 0: off. At the strict tolerance 4 cut
-                  realistic_biceps from 6,754 to 3,056 CG iterations and the
-                  bone scenes' total time by 40%, docs/DESIGN.md)
-    single_precision_preconditioner  EMU, preconditioner "constant-schur": its S0 solves
-                  (one per CG iteration) with the factor rounded to float and its 9x9 block
-                  inverses kept in float, half the bytes streamed (a fixed SPD
-                  preconditioner still: CG's path changes, not the answer; docs/DESIGN.md,
-                  "The cost of an iteration"). single_precision_s0, its name in 0.1.0
-                  development, is accepted with a DeprecationWarning
-    threads       OpenMP and OpenBLAS threads (None: leave as is)
-    error_estimate  EMU: estimate every solve's error to FEM (Solution.error_estimate;
-                  one or two sparse factorisations of the FEM Hessian per
-                  correction step, its symbolic analysis once, at the first solve)
-    error_estimate_steps  at most this many Newton correction steps; a step
-                  after one that needed the PSD-filtered matrix (docs/DESIGN.md)
-    accuracy      the vertex error to FEM wanted, relative to the bounding-box
-                  diagonal (0.01: 1%; EMU's default), instead of a tolerance: both methods stop
-                  when a full Newton step moves no vertex by more than a tenth
-                  of it; EMU also picks alpha (starting from ``alpha``) so that
-                  its error estimate is within 0.6 x accuracy, re-solving at a
-                  larger alpha from the estimate's FEM correction when it is not, and
-                  carries the alpha over to the next solve (``solver.alpha``, at
-                  least 10 mu when lowered); a re-solve
-                  that does not lower the estimate by a tenth is not carried over (the next
-                  solve starts where this one did; without ``fem_correction`` it
-                  ends the raises), and the alpha carried over is at most
-                  1e4 x max(alpha, 100)
-
-    step_fraction  with ``accuracy``: stop when a full step moves no vertex by more than
-                  this fraction of it (0.1; 0.3 with EMU's FEM correction is faster on
-                  two of eight scenes and worse far past inversion: docs/DESIGN.md)
-    fem_correction  EMU with ``accuracy``: where EMU's estimate misses the accuracy,
-                  return its answer corrected by FEM Newton steps (the one the
-                  estimate computed, then up to three exact ones on the estimator's
-                  lagged factor) when they converge, instead of re-solving at a larger
-                  alpha (Solution.corrected; docs/DESIGN.md measures both). None (default): on,
-                  but off for scenes with contact (those Newton steps know no collision
-                  detection; True forces it)
-
-    lagged_factor FEM: Newton-CG preconditioned by the last Cholesky factor, kept
-                  across iterations and solves (the frames of a sequence); a
-                  factorisation only when PCG does not converge within
-                  ``lagged_cg_iterations`` (a stronger FEM baseline where the
-                  Newton matrix changes little: docs/DESIGN.md)
+    options       keyword options, listed below by group (emu.options.OPTIONS,
+                  the one table they are written in); an option that does not
+                  apply to ``method`` (or to EMU's ``step``) is an error naming it
 
     fibers        (m, 3) the rest fibre direction per tet of the scene the model
                   was built with (emu.lowering.tet_fibers); the scene is not changed
     """
 
-    def __init__(self, scene: Scene, method: str = "emu", *, alpha: float | None = None, modes: int = 24,
-                 step: str = "newton-krylov", rtol_grad: float = 1e-6, rtol_energy: float = 1e-10,
-                 noise_factor: float = 2.0, position_tol: float = POSITION_TOL,
-                 max_iterations: int | None = None, cg_max_iterations: int = 500, cg_model_decrease: float = 0.5,
-                 cg_forcing_min: float | None = None,
-                 preconditioner: str = "constant-schur",
-                 preconditioner_refresh: int | None = None, bone_coarse_space: bool = True,
-                 exact_when_definite: bool = True, threads: int | None = None, error_estimate: bool = True,
-                 error_estimate_steps: int = 2, accuracy: float | None = None, recycled_directions: int = 4,
-                 lagged_factor: bool = False, lagged_cg_iterations: int = 25, lbfgs_memory: int = 8,
-                 eigen_filter: str = "clamp", negative_curvature: bool = True, fem_correction: bool | None = None,
-                 step_fraction: float = STEP_FRACTION, single_precision_preconditioner: bool | None = None,
-                 single_precision_s0: bool | None = None):
+    def __init__(self, scene: Scene, method: str = "emu", **options):
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        check_options(method, options.get("step", OPTIONS["step"].default), options)
+        self._setup(scene, method, **{**{n: o.default for n, o in OPTIONS.items()}, **options})
+
+    def _setup(self, scene: Scene, method: str, *, alpha, modes, step, rtol_grad, rtol_energy, noise_factor,
+               position_tol, max_iterations, cg_max_iterations, cg_model_decrease, cg_forcing_min, preconditioner,
+               preconditioner_refresh, bone_coarse_space, exact_when_definite, threads, error_estimate,
+               error_estimate_steps, accuracy, recycled_directions, lagged_factor, lagged_cg_iterations,
+               lbfgs_memory, eigen_filter, negative_curvature, fem_correction, step_fraction,
+               single_precision_preconditioner, single_precision_s0):
+        """The Solver's setup, every option given (defaults from emu.options.OPTIONS)."""
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if step not in STEPS:
@@ -745,6 +652,11 @@ class Solver:
         if a.shape != (m, 3, 3):
             raise ValueError(f"initial deformation gradients must have shape ({m}, 3, 3), got {a.shape}")
         return a[self._model_tets].transpose(0, 2, 1).reshape(-1, 9)
+
+
+# help(emu.Solver) and IDEs show every option with its default, from the one table
+Solver.__init__.__signature__ = solver_signature(Solver.__init__)
+Solver.__doc__ += options_text()
 
 
 def solve(scene: Scene, activation=None, method: str = "emu", *, normalized: bool = False, gravity=None,

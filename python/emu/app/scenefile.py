@@ -44,19 +44,10 @@
     max_activation = 1e5
     acap_weight = 1.0
 
-    [solver]                     # any emu.Solver option
-    method = "emu"               # or "fem"
-    alpha = 100.0                # EMU's ACAP stiffness / mu (with accuracy: where its search starts)
+    [solver]                     # emu.Solver's options (emu.options.OPTIONS; docs/guide/options.md),
+    method = "emu"               # or "fem"; an option of the other method is an error naming it
     accuracy = 0.01              # the vertex error to FEM wanted (1% of the diagonal): picks alpha
-                                 # and stops iterating when steps no longer matter (emu.Solver)
-    modes = 24
-    step = "newton-krylov"       # or "woodbury", "lbfgs"
-    rtol_grad = 1e-6
-    rtol_energy = 1e-10
-    max_iterations = 500
-    fem_correction = true        # accuracy mode: FEM-correct EMU's answer where its estimate misses
-    lagged_factor = false        # FEM: Newton-CG on a lagged Cholesky factor
-    eigen_filter = "clamp"       # or "abs"; negative_curvature = true (FEM at saddles)
+                                 # and stops iterating when steps no longer matter
     threads = 2
 
     [contact]                    # surfaces that touch without passing through (FEM; needs ipctk)
@@ -111,6 +102,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..options import check_options, scene_file_types
 from ..activation import Curve
 from .. import datasets
 from ..io.mesh import load_scene
@@ -139,13 +131,7 @@ _SCHEMA = {
     "parts": "table of tables",
     "pins": list,
     "gravity": list,
-    "solver": {"method": str, "alpha": float, "modes": int, "step": str, "rtol_grad": float,
-               "rtol_energy": float, "max_iterations": int, "cg_max_iterations": int, "preconditioner": str,
-               "preconditioner_refresh": int, "exact_when_definite": bool, "threads": int,
-               "bone_coarse_space": bool, "accuracy": float, "error_estimate": bool, "fem_correction": bool,
-               "lagged_factor": bool, "recycled_directions": int, "eigen_filter": str, "negative_curvature": bool,
-               "noise_factor": float, "position_tol": float, "cg_model_decrease": float, "cg_forcing_min": float,
-               "step_fraction": float},
+    "solver": scene_file_types(),   # emu.options.OPTIONS: the Solver's options, written once
     "frames": {"count": int, "dt": float},
     "contact": {"pairs": list, "self_contact": bool, "distance": float, "stiffness": float},
     "activation": "table of tables",
@@ -342,6 +328,13 @@ def load_scene_file(path) -> SceneSpec:
         except ValueError as e:
             raise SceneFileError(f"contact: {e}") from None
     solver = dict(data.get("solver", {}))
+    method = solver.get("method", "emu")
+    if method not in ("emu", "fem"):
+        raise SceneFileError(f"solver.method must be \"emu\" or \"fem\", got {method!r}")
+    try:   # an option of the other method is an error here, before anything runs
+        check_options(method, solver.get("step", "newton-krylov"), {k: v for k, v in solver.items() if k != "method"})
+    except ValueError as e:
+        raise SceneFileError(f"solver.{e}") from None
     frames = data.get("frames", {})
     count, dt = int(frames.get("count", 1)), float(frames.get("dt", 1.0))
     if count < 1 or dt <= 0:

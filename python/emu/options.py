@@ -1,0 +1,209 @@
+"""The solver's options, written once: name, type, default, group, the
+methods it applies to, and what it does. emu.Solver's signature and the
+check of what a user passes, the scene-file schema's [solver] table and the
+options page of the docs (docs/guide/options.md) all come from ``OPTIONS``.
+
+Groups: ``stopping`` (when a solve ends), ``accuracy`` (the error to FEM
+wanted and EMU's estimate of it), ``emu`` (EMU's step, preconditioner and
+alpha), ``fem`` (FEM's Newton variants), ``machine`` (threads).
+"""
+from __future__ import annotations
+
+import difflib
+import inspect
+from dataclasses import dataclass
+
+from .accuracy import STEP_FRACTION
+
+__all__ = ["Option", "OPTIONS", "GROUPS", "check_options", "options_markdown", "options_text",
+           "scene_file_types", "solver_signature"]
+
+BOTH = ("emu", "fem")
+# EMU's Newton-Krylov step without ``accuracy``: converged when a full step
+# moves no vertex by more than this x the bounding-box diagonal.
+POSITION_TOL = 1e-7
+
+
+@dataclass(frozen=True)
+class Option:
+    name: str
+    type: type | tuple           # what a scene file may give (int where a float is asked is accepted)
+    default: object
+    group: str
+    methods: tuple               # the methods it applies to
+    doc: str
+    steps: tuple | None = None   # EMU: the steps it applies to (None: all)
+
+
+GROUPS = {
+    "stopping": "When a solve ends",
+    "accuracy": "The error to FEM wanted, and EMU's estimate of it",
+    "emu": "EMU: alpha, the step and its preconditioner",
+    "fem": "FEM: Newton's variants",
+    "machine": "The machine",
+}
+
+NK = ("newton-krylov",)
+
+_TABLE = [
+    # stopping
+    Option("rtol_grad", float, 1e-6, "stopping", BOTH,
+           "converged when |g| <= rtol_grad |g_0| (the strict test; with ``accuracy`` the step test usually ends first)"),
+    Option("rtol_energy", float, 1e-10, "stopping", BOTH,
+           "... and the last energy decrease is at most rtol_energy x the total decrease"),
+    Option("noise_factor", float, 2.0, "stopping", BOTH,
+           "... or when |g| <= noise_factor x the gradient's round-off, measured in the endgame from the "
+           "gradient at the iterate moved by one rounding (EMU with bones needs it: its fit's conditioning can "
+           "bring the round-off near rtol_grad |g_0|; 0: off)"),
+    Option("position_tol", float, POSITION_TOL, "stopping", ("emu",),
+           "EMU's Newton-Krylov step without ``accuracy``: ... or when a full step moves no vertex by more than "
+           "this x the bounding-box diagonal, once |g| <= 1e-3 |g_0| (0: off)", NK),
+    Option("max_iterations", (int, type(None)), None, "stopping", BOTH,
+           "per solve (None: 200 for FEM, 500 for EMU's Newton-Krylov, 5000 for L-BFGS, 20000 for Woodbury)"),
+    Option("step_fraction", float, STEP_FRACTION, "stopping", BOTH,
+           "with ``accuracy``: stop when a full step moves no vertex by more than this fraction of it"),
+    # accuracy
+    Option("accuracy", (float, type(None)), None, "accuracy", BOTH,
+           "the vertex error to FEM wanted, relative to the bounding-box diagonal (0.01: 1%; EMU's default "
+           "unless ``alpha`` is given), instead of a tolerance: both methods stop when a full Newton step moves "
+           "no vertex by more than ``step_fraction`` of it; EMU also picks alpha so that its error estimate is "
+           "within 0.6 x accuracy, raising it (or correcting its answer, ``fem_correction``) where not, and "
+           "carries the alpha over to the next solve"),
+    Option("error_estimate", bool, True, "accuracy", ("emu",),
+           "estimate every solve's error to FEM (Solution.error_estimate) from FEM Newton steps at EMU's "
+           "answer: one or two sparse factorisations per step, no FEM solve"),
+    Option("error_estimate_steps", int, 2, "accuracy", ("emu",),
+           "at most this many FEM Newton correction steps in the estimate"),
+    Option("fem_correction", (bool, type(None)), None, "accuracy", ("emu",),
+           "with ``accuracy``: where the estimate misses it, return EMU's answer corrected by FEM Newton steps "
+           "instead of re-solving at a larger alpha (None: on, except with contact)"),
+    # emu
+    Option("alpha", (float, type(None)), None, "emu", ("emu",),
+           "the ACAP coupling's weight relative to the softest muscle's shear modulus; given (without "
+           "``accuracy``) it is kept fixed and iterated to the strict tolerance (None: 100, or chosen for "
+           "``accuracy``)"),
+    Option("step", str, "newton-krylov", "emu", ("emu",),
+           "EMU's step: \"newton-krylov\" (default), \"woodbury\" (the paper's quasi-Newton step) or \"lbfgs\""),
+    Option("preconditioner", str, "constant-schur", "emu", ("emu",),
+           "Newton-Krylov's preconditioner: \"constant-schur\" (the filtered Hessian's inverse through a "
+           "constant Schur complement: one factorisation per alpha; default), \"schur\" (the exact Schur "
+           "complement: a factorisation per rebuild) or \"woodbury\" (the paper's approximation through "
+           "``modes``)", NK),
+    Option("modes", int, 24, "emu", ("emu",),
+           "the ACAP modes the Woodbury step and preconditioner use"),
+    Option("preconditioner_refresh", (int, type(None)), None, "emu", ("emu",),
+           "rebuild the preconditioner every n steps (None: 3 for Newton-Krylov, 20 for L-BFGS)"),
+    Option("cg_max_iterations", int, 500, "emu", ("emu",), "CG iterations per Newton step at most", NK),
+    Option("cg_model_decrease", float, 0.5, "emu", ("emu",),
+           "CG's truncation test (Nash-Sofer): stop when an iteration lowers the quadratic model by at most "
+           "this fraction of its decrease so far over the iteration count (0: the residual test alone)", NK),
+    Option("cg_forcing_min", (float, type(None)), None, "emu", ("emu",),
+           "a floor on CG's forcing term eta (CG stops at |r| <= eta |g|, eta = min(0.5, max(floor, "
+           "sqrt(|g| / |g_0|))), Eisenstat-Walker; None: 0.1 with ``accuracy``, else 0)", NK),
+    Option("exact_when_definite", bool, True, "emu", BOTH,
+           "use the unfiltered Hessian while it is definite, the PSD-filtered one after it fails"),
+    Option("eigen_filter", str, "clamp", "emu", BOTH,
+           "where an element Hessian is not PSD: \"clamp\" its negative eigenvalues to 0 or reflect them "
+           "(\"abs\")"),
+    Option("bone_coarse_space", bool, True, "emu", ("emu",),
+           "with movable bones: a coarse correction for the bones' turns in the preconditioner"),
+    Option("recycled_directions", int, 4, "emu", ("emu",),
+           "with movable bones: keep the directions of up to this many long CG solves in that correction "
+           "(0: off)"),
+    Option("lbfgs_memory", int, 8, "emu", ("emu",), "the L-BFGS step's curvature pairs", ("lbfgs",)),
+    Option("single_precision_preconditioner", (bool, type(None)), None, "emu", ("emu",),
+           "the constant-Schur preconditioner's solves in single precision (None: on)"),
+    Option("single_precision_s0", (bool, type(None)), None, "emu", ("emu",),
+           "the old name of ``single_precision_preconditioner`` (deprecated)"),
+    # fem
+    Option("lagged_factor", bool, False, "fem", ("fem",),
+           "Newton-CG preconditioned by the last Cholesky factor, kept across iterations and solves; a new "
+           "factorisation only when PCG misses its tolerance"),
+    Option("lagged_cg_iterations", int, 25, "fem", ("fem",),
+           "with ``lagged_factor``: PCG iterations before a new factorisation"),
+    Option("negative_curvature", bool, True, "fem", ("fem",),
+           "near a saddle (a shape about to buckle) add the most negative curvature direction to the step"),
+    # machine
+    Option("threads", (int, type(None)), None, "machine", BOTH, "OpenMP and OpenBLAS threads (None: leave as is)"),
+]
+OPTIONS = {o.name: o for o in _TABLE}
+
+
+def check_options(method: str, step: str, given: dict) -> None:
+    """Raise ValueError for an option that is not one (naming the nearest) or
+    that does not apply to ``method`` (and EMU's ``step``), naming it; an
+    option given at its default changes nothing and passes."""
+    for name in given:
+        o = OPTIONS.get(name)
+        if o is None:
+            near = difflib.get_close_matches(name, OPTIONS, n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise ValueError(f"unknown solver option {name!r}{hint}; the options are listed by "
+                             "help(emu.Solver) and in docs/guide/options.md")
+        if given[name] is o.default or given[name] == o.default:
+            continue   # the default changes nothing, whatever the method
+        if method not in o.methods:
+            raise ValueError(f"{name} is an option of {' and '.join(m.upper() for m in o.methods)} only; leave "
+                             f"it out for method={method!r}")
+        if o.steps is not None and method == "emu" and step not in o.steps:
+            raise ValueError(f"{name} applies to EMU's {' or '.join(o.steps)} step only; leave it out for "
+                             f"step={step!r}")
+
+
+def scene_file_types() -> dict:
+    """{option: type} for a scene file's [solver] table (None-able options
+    take their value type; None is not written in TOML)."""
+    out = {"method": str}
+    for o in _TABLE:
+        if o.name == "single_precision_s0":
+            continue
+        t = o.type if isinstance(o.type, tuple) else (o.type,)
+        t = tuple(x for x in t if x is not type(None))
+        out[o.name] = t[0] if len(t) == 1 else t
+    return out
+
+
+def solver_signature(init) -> inspect.Signature:
+    """Solver.__init__'s signature from the table (help(), IDEs): self, scene,
+    method, then every option keyword-only with its default."""
+    params = list(inspect.signature(init).parameters.values())[:3]
+    params += [inspect.Parameter(o.name, inspect.Parameter.KEYWORD_ONLY, default=o.default) for o in _TABLE]
+    return inspect.Signature(params)
+
+
+def options_text() -> str:
+    """The options as plain text by group (Solver's docstring)."""
+    import textwrap
+
+    out = ["", "    Options", "    -------"]
+    for group, title in GROUPS.items():
+        out += ["", f"    {title}:"]
+        for o in _TABLE:
+            if o.group == group:
+                head = f"    {o.name} = {o.default!r}"
+                out.append(head)
+                out += textwrap.wrap(o.doc, 92, initial_indent=" " * 8, subsequent_indent=" " * 8)
+    return "\n".join(out) + "\n"
+
+
+def options_markdown() -> str:
+    """The options page (docs/guide/options.md): a table per group."""
+    out = ["# Solver options", "",
+           "Every option of `emu.Solver(scene, method, **options)`, `emu.solve(...)` and a scene file's "
+           "`[solver]` table, by group. An option that does not apply to the method chosen is an error "
+           "naming it. Generated from `emu.options.OPTIONS` (`python -c \"from emu.options import "
+           "options_markdown as m; print(m(), end='')\" > docs/guide/options.md`; a test keeps this page "
+           "current).", ""]
+    for group, title in GROUPS.items():
+        out += [f"## {title}", "", "| option | default | methods | what it does |", "|---|---|---|---|"]
+        for o in _TABLE:
+            if o.group != group:
+                continue
+            where = ", ".join(m.upper() for m in o.methods)
+            if o.steps:
+                where += f" ({', '.join(o.steps)})"
+            doc = o.doc.replace("|", "\\|")   # |g| inside a table cell
+            out.append(f"| `{o.name}` | `{o.default!r}` | {where} | {doc} |")
+        out.append("")
+    return "\n".join(out)
+
