@@ -129,7 +129,7 @@ def test_cli_sweep_and_its_refusals(tmp_path):
     assert case_id({"a": 1, "b": 2}) == case_id({"b": 2, "a": 1})
     # every case is checked before any runs: a misspelt key in one case, a
     # plotted bone that does not exist; nothing runs, each case is named
-    typo = write(tmp_path, {"solver.alpha": [30.0]}, extra="")
+    typo = write(tmp_path, {"solver.accuracy": [0.01]}, extra="")
     with open(typo, "a") as f:
         f.write('[[cases]]\n"solver.method" = "fem"\n[[cases]]\n"solver.alfa" = 3.0\n')
     with pytest.raises(SweepError, match=r"1 of 2 case\(s\) would fail, nothing was run:\n  case .*solver.alfa.*"
