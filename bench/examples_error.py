@@ -60,7 +60,7 @@ def run_example(path, extra: dict) -> dict:
         rows.append({"frame": k, "time": k * spec.dt, "emu_s": se.time_s, "estimate_s": se.error_estimate_time_s,
                      "fem_s": sf.time_s, "error": emu.vertex_error(se, sf), "estimate": se.error_estimate,
                      "alpha": se.settings["alpha"], "corrected": se.corrected, "angles": angles,
-                     "activation": {m: a / spec.scene.parts[m].max_activation for m, a in act.items()},
+                     "activation": spec.scene.normalised_activation(act),
                      "converged": se.converged and sf.converged})
         if k in picks:
             frames[k] = se.positions.copy()

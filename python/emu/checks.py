@@ -302,6 +302,7 @@ def loose_contacts(points: np.ndarray, tets: np.ndarray, soft: dict, bones: dict
     out = []
     ok = np.zeros(len(points), bool)
     ok[np.asarray(shared_ok, np.int64).ravel()] = True
+    surfaces = {name: boundary_faces(tets[soft_tets]) for name, soft_tets in soft.items()}
     for bone, bone_tets in bones.items():
         bf = boundary_faces(tets[bone_tets])
         if len(bf) == 0:
@@ -310,8 +311,7 @@ def loose_contacts(points: np.ndarray, tets: np.ndarray, soft: dict, bones: dict
         tol = gap * float(np.median(edges))
         on_bone = np.zeros(len(points), bool)
         on_bone[np.unique(tets[bone_tets])] = True
-        for name, soft_tets in soft.items():
-            sf = boundary_faces(tets[soft_tets])
+        for name, sf in surfaces.items():
             verts = np.unique(sf)
             query = verts[~on_bone[verts] & ~ok[verts]]
             if len(query) == 0:

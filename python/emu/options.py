@@ -18,7 +18,7 @@ from .accuracy import STEP_FRACTION
 __all__ = ["Option", "OPTIONS", "GROUPS", "check_options", "options_markdown", "options_text",
            "scene_file_types", "solver_signature"]
 
-BOTH = ("emu", "fem")
+METHODS = BOTH = ("emu", "fem")
 # EMU's Newton-Krylov step without ``accuracy``: converged when a full step
 # moves no vertex by more than this x the bounding-box diagonal.
 POSITION_TOL = 1e-7

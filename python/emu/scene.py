@@ -300,6 +300,16 @@ class Scene:
 
     # ------------------------------------------------------------ model build
     @property
+    def part_index(self) -> np.ndarray:
+        """(m,) the index in ``parts`` of each tet's part, -1 for a tet of none."""
+        return self._owner.copy()
+
+    def normalised_activation(self, activation: dict) -> dict:
+        """{muscle: a / its max_activation} of an absolute {muscle: a} (names
+        that are not parts of the scene are left out)."""
+        return {m: a / self.parts[m].max_activation for m, a in activation.items() if m in self.parts}
+
+    @property
     def muscles(self) -> list[str]:
         return [p.name for p in self.parts.values() if p.kind == "muscle"]
 

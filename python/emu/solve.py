@@ -16,7 +16,7 @@ from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, DEFAULT_ACC
 from .checks import inverted_tets
 from .contact import ContactTerm
 from .geometry import bbox_diagonal, deformation_gradients, tet_vertices, vertex_error
-from .options import OPTIONS, POSITION_TOL, check_options, options_text, solver_signature
+from .options import METHODS, OPTIONS, POSITION_TOL, check_options, options_text, solver_signature
 from .lowering import build_model, declared_joint_rows, declared_joint_world, model_tet_order
 from .poses import parse_pose
 from .runtime import set_threads
@@ -30,7 +30,6 @@ class NeutralModeWarning(UserWarning):
     equilibrium is not unique (see Solution.neutral_modes)."""
 
 
-METHODS = ("emu", "fem")
 STEPS = ("newton-krylov", "woodbury", "lbfgs")
 # how the PSD-filtered element Hessian treats a negative eigenvalue (SolverOptions::eigen_filter order)
 EIGEN_FILTERS = ("clamp", "abs")

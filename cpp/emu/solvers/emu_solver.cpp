@@ -202,10 +202,8 @@ void EmuSolver::riemannian_columns(const Mat9X& F, const Mat9X& g, const Mat9X& 
       const Mat3 Cp = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
                       eig.eigenvectors().transpose();
       const Mat3 W = R.transpose() * unflatten(v.col(u));
-      const Eigen::Vector3d a = 0.25 * (Cp * Eigen::Vector3d(W(2, 1) - W(1, 2), W(0, 2) - W(2, 0), W(1, 0) - W(0, 1)));
-      Mat3 A;
-      A << 0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0;
-      M += R * A;
+      const Vec3 w(0.5 * (W(2, 1) - W(1, 2)), 0.5 * (W(0, 2) - W(2, 0)), 0.5 * (W(1, 0) - W(0, 1)));
+      M += R * cross_matrix(0.5 * (Cp * w));
     }
     out.col(u) = flatten(project_to_tangent(R, M));
   }

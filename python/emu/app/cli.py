@@ -261,7 +261,7 @@ def _solve(args):
 
             picture = os.path.splitext(args.out)[0] + ".png"
             rest_act = {m: 0.0 for m in scene.muscles}
-            solved_act = {m: a / scene.parts[m].max_activation for m, a in act.items() if m in scene.parts}
+            solved_act = scene.normalised_activation(act)
             contact_sheet(picture, scene, [scene.points, sol.positions], titles=["rest", "solved"],
                           activations=[rest_act, solved_act], view=default_view(scene))
             print(f"wrote {picture} (rest and solved; --no-preview skips it)")

@@ -50,8 +50,7 @@ def _preview(path, spec: SceneSpec, kept: dict, log: dict) -> None:
     scene = spec.scene
     frames = sorted(kept)
     entries = [log["frames"][k] for k in frames]
-    acts = [{m: a / scene.parts[m].max_activation for m, a in e["activation"].items() if m in scene.parts}
-            for e in entries]
+    acts = [scene.normalised_activation(e["activation"]) for e in entries]
     titles = []
     for e in entries:
         angles = e["bone_angles_deg"]
@@ -123,8 +122,7 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                                   "accuracy_reached": sol.accuracy_reached, "fem_corrected": sol.corrected,
                                   "inverted_tets": sol.inverted_tets, "contact": sol.contact})
             if usd is not None:
-                usd.add_frame(k, sol.positions, {m: a / spec.scene.parts[m].max_activation
-                                                 for m, a in act.items() if m in spec.scene.parts})
+                usd.add_frame(k, sol.positions, spec.scene.normalised_activation(act))
             if want_preview and k in picks:
                 kept[k] = sol.positions.copy()
             if on_frame is not None:

@@ -102,7 +102,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..options import check_options, scene_file_types
+from ..options import METHODS, check_options, scene_file_types
 from ..activation import Curve
 from .. import datasets
 from ..io.mesh import load_scene
@@ -329,7 +329,7 @@ def load_scene_file(path) -> SceneSpec:
             raise SceneFileError(f"contact: {e}") from None
     solver = dict(data.get("solver", {}))
     method = solver.get("method", "emu")
-    if method not in ("emu", "fem"):
+    if method not in METHODS:
         raise SceneFileError(f"solver.method must be \"emu\" or \"fem\", got {method!r}")
     try:   # an option of the other method is an error here, before anything runs
         check_options(method, solver.get("step", "newton-krylov"), {k: v for k, v in solver.items() if k != "method"})

@@ -34,10 +34,7 @@ def write_obj(path, points: np.ndarray, faces: np.ndarray, groups=None):
 def part_groups(scene, faces_tet: np.ndarray) -> list:
     """[(part name, face ids)] for write_obj: each boundary face (faces_tet: its
     tet, (f,)) goes to the part of its tet; parts with no boundary face are left out."""
-    owner = np.full(len(scene.tets), -1, np.int64)
-    for k, p in enumerate(scene.parts.values()):
-        owner[p.tets] = k
-    face_part = owner[faces_tet]
+    face_part = scene.part_index[faces_tet]
     out = [(p.name, np.flatnonzero(face_part == k)) for k, p in enumerate(scene.parts.values())]
     rest = np.flatnonzero(face_part < 0)
     if len(rest):

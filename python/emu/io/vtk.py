@@ -48,9 +48,7 @@ def write_solution(path, scene, solution, *, activation=None, fibers=None):
     x = np.asarray(getattr(solution, "positions", solution), dtype=np.float64)
     if x.shape != scene.points.shape:
         raise ValueError(f"write_solution: positions must have shape {scene.points.shape}, got {x.shape}")
-    part = np.full(len(scene.tets), -1, np.int32)
-    for i, p in enumerate(scene.parts.values()):
-        part[p.tets] = i
+    part = scene.part_index.astype(np.int32)
     fib = tet_fibers(scene) if fibers is None else np.asarray(fibers, dtype=np.float64)
     if fib.shape != (len(scene.tets), 3):
         raise ValueError(f"write_solution: fibers must have shape ({len(scene.tets)}, 3), got {fib.shape}")
