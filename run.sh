@@ -33,7 +33,7 @@ setup() {
   done
   "$PY" -m pip install -q --disable-pip-version-check "scikit-build-core>=0.8" "pybind11>=2.11" numpy "meshio>=5.3" \
     "matplotlib>=3.5" "pooch>=1.6" pytest scipy "hypothesis>=6" "ipctk>=1.6" "dask[distributed]>=2023.1" \
-    "pytetwild>=0.2.3,<0.4" "usd-core>=23.11" 2>&1 | grep -v -i "warning" || true
+    "pytetwild>=0.2.3,<0.3" "usd-core>=23.11" 2>&1 | grep -v -i "warning" || true
   echo "[emu] building and installing the emu package"
   "$PY" -m pip install -q --disable-pip-version-check --no-build-isolation -e . 2>&1 | grep -v -i "warning" || true
   "$PY" -c "import emu" || { echo "[emu] the package did not install"; exit 1; }

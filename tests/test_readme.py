@@ -51,3 +51,17 @@ def _help(command) -> str:
         except SystemExit:
             pass
     return out.getvalue()
+
+
+def test_the_getting_started_page_runs(tmp_path, monkeypatch):
+    """docs/getting-started.md: its Python blocks run in order, as written."""
+    page = (ROOT / "docs" / "getting-started.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", page, re.S)
+    assert len(blocks) == 2
+    monkeypatch.chdir(tmp_path)
+    namespace = {}
+    for block in blocks:
+        exec(compile(block, "getting-started.md", "exec"), namespace)
+    assert namespace["sol"].converged and os.path.getsize(tmp_path / "flexed.vtu") > 0
+    assert namespace["fem"].settings["rtol_grad"] == 1e-8 == namespace["emu_solver"].settings["rtol_grad"]
+    assert namespace["emu_solver"].settings["step"] == "lbfgs"

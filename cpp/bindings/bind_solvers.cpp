@@ -7,6 +7,7 @@
 #include "emu/model/model.h"
 #include "emu/solvers/emu_solver.h"
 #include "emu/solvers/fem_solver.h"
+#include "emu/solvers/option_choices.h"
 
 namespace py = pybind11;
 
@@ -149,7 +150,9 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("step_tol_grad", &SolverOptions::step_tol_grad)
       .def_readwrite("step_tol_cold_scale", &SolverOptions::step_tol_cold_scale)
       .def_readwrite("max_backtracks", &SolverOptions::max_backtracks)
-      .def_readwrite("eigen_filter", &SolverOptions::eigen_filter)
+      .def_property(
+          "eigen_filter", [](const SolverOptions& o) { return choice_name(kEigenFilters, o.eigen_filter); },
+          [](SolverOptions& o, const std::string& s) { o.eigen_filter = parse_choice(kEigenFilters, "eigen_filter", s); })
       .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite)
       .def_readwrite("negative_curvature", &SolverOptions::negative_curvature)
       .def_readwrite("lagged_cg_iterations", &SolverOptions::lagged_cg_iterations)
@@ -164,28 +167,35 @@ void bind_solvers(py::module_& m) {
           "(scipy.sparse, 3n x 3n), max_step(x0, x1) and check_start(x); None: no contact")
       .def_property_readonly("has_contact", [](const SolverOptions& o) { return o.contact.active(); });
 
-  py::enum_<EmuStep>(m, "EmuStep")
-      .value("woodbury", EmuStep::Woodbury)
-      .value("newton_krylov", EmuStep::NewtonKrylov)
-      .value("lbfgs", EmuStep::Lbfgs);
-
-  py::enum_<EmuPreconditioner>(m, "EmuPreconditioner")
-      .value("woodbury", EmuPreconditioner::Woodbury)
-      .value("schur", EmuPreconditioner::Schur)
-      .value("constant_schur", EmuPreconditioner::ConstantSchur);
+  m.def(
+      "option_choices",
+      [] {
+        py::dict d;
+        d["step"] = py::tuple(py::cast(choice_names(kEmuSteps)));
+        d["preconditioner"] = py::tuple(py::cast(choice_names(kEmuPreconditioners)));
+        d["eigen_filter"] = py::tuple(py::cast(choice_names(kEigenFilters)));
+        return d;
+      },
+      "{option: (its choices, the default first)} for the options that take one of a few names");
 
   py::class_<EmuOptions>(m, "EmuOptions")
       .def(py::init<>())
       .def_readwrite("alpha", &EmuOptions::alpha)
       .def_readwrite("modes", &EmuOptions::modes)
-      .def_readwrite("step", &EmuOptions::step)
+      .def_property(
+          "step", [](const EmuOptions& o) { return choice_name(kEmuSteps, o.step); },
+          [](EmuOptions& o, const std::string& s) { o.step = parse_choice(kEmuSteps, "step", s); })
       .def_readwrite("cg_max_iterations", &EmuOptions::cg_max_iterations)
       .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max)
       .def_readwrite("cg_forcing_exponent", &EmuOptions::cg_forcing_exponent)
       .def_readwrite("cg_forcing_min", &EmuOptions::cg_forcing_min)
       .def_readwrite("cg_model_decrease", &EmuOptions::cg_model_decrease)
       .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh)
-      .def_readwrite("preconditioner", &EmuOptions::preconditioner)
+      .def_property(
+          "preconditioner", [](const EmuOptions& o) { return choice_name(kEmuPreconditioners, o.preconditioner); },
+          [](EmuOptions& o, const std::string& s) {
+            o.preconditioner = parse_choice(kEmuPreconditioners, "preconditioner", s);
+          })
       .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space)
       .def_readwrite("recycled_directions", &EmuOptions::recycled_directions)
       .def_readwrite("single_precision_preconditioner", &EmuOptions::single_precision_preconditioner)

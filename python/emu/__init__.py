@@ -19,11 +19,13 @@ from .poses import pose_about, rotation
 from .runtime import __version__, info
 from .scene import MeshWarning, Scene
 from .solve import AccuracyWarning, NeutralModeWarning, Solution, Solver, solve
+from .options import AccuracyOptions, EmuOptions, FemOptions, NewtonOptions, StoppingOptions
 from .bones import bone_angle, bone_motion, rigid_fit, signed_angle
 from .contact import ContactWarning
 from .app.sweep import sweep
-from . import activation, anatomy, bones, contact, datasets, fibers, geometry, io, joints, lowering, meshes, poses, run, scenefile, scenes
+from . import activation, anatomy, bones, contact, datasets, fibers, geometry, io, joints, lowering, meshes, options, poses, run, scenefile, scenes
 
-__all__ = ["Scene", "Part", "Joint", "MeshWarning", "lame", "Solver", "Solution", "solve", "rotation", "pose_about",
+__all__ = ["Scene", "Part", "Joint", "MeshWarning", "lame", "Solver", "Solution", "solve", "StoppingOptions",
+           "AccuracyOptions", "NewtonOptions", "EmuOptions", "FemOptions", "rotation", "pose_about",
            "io", "meshes", "scenes", "datasets", "fibers", "info", "vertex_error", "error_history", "time_to_error", "bbox_diagonal", "inverted_tets", "bone_angle", "bone_motion", "rigid_fit",
            "signed_angle", "NeutralModeWarning", "AccuracyWarning", "ContactWarning", "contact", "sweep", "__version__"]

@@ -345,7 +345,7 @@ def _mesher():
         from pytetwild import PyfTetWildWrapper
     except ImportError as e:
         raise ImportError("emu's mesher is fTetWild, from the package pytetwild, an optional extra: "
-                          f"pip install 'emu[mesh]' (or 'pytetwild>=0.2.3,<0.4') [{e}]") from None
+                          f"pip install 'emu[mesh]' (or 'pytetwild>=0.2.3,<0.3') [{e}]") from None
     return PyfTetWildWrapper
 
 

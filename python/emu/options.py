@@ -4,19 +4,25 @@ check of what a user passes, the scene-file schema's [solver] table and the
 options page of the docs (docs/guide/options.md) all come from ``OPTIONS``.
 
 Groups: ``stopping`` (when a solve ends), ``accuracy`` (the error to FEM
-wanted and EMU's estimate of it), ``emu`` (EMU's step, preconditioner and
-alpha), ``fem`` (FEM's Newton variants), ``machine`` (threads).
+wanted and EMU's estimate of it), ``newton`` (both methods' Newton matrix),
+``emu`` (EMU's step, preconditioner and alpha), ``fem`` (FEM's Newton
+variants), ``machine`` (threads). Each group but the machine's is also a
+class (StoppingOptions, ...) a user may build once and pass to several
+solvers: ``emu.Solver(scene, "emu", emu.StoppingOptions(rtol_grad=1e-8))``.
 """
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import inspect
 from dataclasses import dataclass
 
+from . import _core
 from .accuracy import STEP_FRACTION
 
-__all__ = ["Option", "OPTIONS", "GROUPS", "check_options", "options_markdown", "options_text",
-           "scene_file_types", "solver_signature"]
+__all__ = ["Option", "OPTIONS", "GROUPS", "CHOICES", "OptionGroup", "StoppingOptions", "AccuracyOptions",
+           "NewtonOptions", "EmuOptions", "FemOptions", "GROUP_CLASSES", "merge_groups", "parse_option", "check_options", "options_markdown",
+           "options_text", "scene_file_types", "solver_signature"]
 
 METHODS = BOTH = ("emu", "fem")
 # EMU's Newton-Krylov step without ``accuracy``: converged when a full step
@@ -34,10 +40,21 @@ class Option:
     doc: str
     steps: tuple | None = None   # EMU: the steps it applies to (None: all)
 
+    @property
+    def choices(self) -> tuple | None:
+        """The names it takes, for an option that is one of a few (spelled as in C++)."""
+        return CHOICES.get(self.name)
+
+
+# {option: its choices, the default first}: spelled once, in the C++ core
+# (emu/solvers/option_choices.h), which takes and gives the same strings
+CHOICES = dict(_core.option_choices())
+
 
 GROUPS = {
     "stopping": "When a solve ends",
     "accuracy": "The error to FEM wanted, and EMU's estimate of it",
+    "newton": "Both methods: the Newton matrix",
     "emu": "EMU: alpha, the step and its preconditioner",
     "fem": "FEM: Newton's variants",
     "machine": "The machine",
@@ -82,9 +99,9 @@ _TABLE = [
            "the ACAP coupling's weight relative to the softest muscle's shear modulus; given (without "
            "``accuracy``) it is kept fixed and iterated to the strict tolerance (None: 100, or chosen for "
            "``accuracy``)"),
-    Option("step", str, "newton-krylov", "emu", ("emu",),
+    Option("step", str, CHOICES["step"][0], "emu", ("emu",),
            "EMU's step: \"newton-krylov\" (default), \"woodbury\" (the paper's quasi-Newton step) or \"lbfgs\""),
-    Option("preconditioner", str, "constant-schur", "emu", ("emu",),
+    Option("preconditioner", str, CHOICES["preconditioner"][0], "emu", ("emu",),
            "Newton-Krylov's preconditioner: \"constant-schur\" (the filtered Hessian's inverse through a "
            "constant Schur complement: one factorisation per alpha; default), \"schur\" (the exact Schur "
            "complement: a factorisation per rebuild) or \"woodbury\" (the paper's approximation through "
@@ -100,9 +117,9 @@ _TABLE = [
     Option("cg_forcing_min", (float, type(None)), None, "emu", ("emu",),
            "a floor on CG's forcing term eta (CG stops at |r| <= eta |g|, eta = min(0.5, max(floor, "
            "sqrt(|g| / |g_0|))), Eisenstat-Walker; None: 0.1 with ``accuracy``, else 0)", NK),
-    Option("exact_when_definite", bool, True, "emu", BOTH,
+    Option("exact_when_definite", bool, True, "newton", BOTH,
            "use the unfiltered Hessian while it is definite, the PSD-filtered one after it fails"),
-    Option("eigen_filter", str, "clamp", "emu", BOTH,
+    Option("eigen_filter", str, CHOICES["eigen_filter"][0], "newton", BOTH,
            "where an element Hessian is not PSD: \"clamp\" its negative eigenvalues to 0 or reflect them "
            "(\"abs\")"),
     Option("bone_coarse_space", bool, True, "emu", ("emu",),
@@ -127,6 +144,77 @@ _TABLE = [
     Option("threads", (int, type(None)), None, "machine", BOTH, "OpenMP and OpenBLAS threads (None: leave as is)"),
 ]
 OPTIONS = {o.name: o for o in _TABLE}
+DEPRECATED = {"single_precision_s0"}
+
+
+class OptionGroup:
+    """Base of the option group classes: frozen dataclasses whose fields are
+    one group's options with the table's defaults."""
+
+    group: str = ""
+
+    def given(self) -> dict:
+        """{option: value} of the fields not at their default."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if getattr(self, f.name) != OPTIONS[f.name].default}
+
+
+def _check_group_values(self) -> None:
+    for f in dataclasses.fields(self):
+        o, v = OPTIONS[f.name], getattr(self, f.name)
+        if o.choices and v not in o.choices:
+            raise ValueError(f"{f.name} must be one of {', '.join(map(repr, o.choices))}, got {v!r}")
+
+
+def _group_class(name: str, group: str) -> type:
+    """A frozen dataclass of ``group``'s options (keyword-only, the table's
+    defaults), its docstring the group's part of options_text()."""
+    fields = [(o.name, object, dataclasses.field(default=o.default)) for o in _TABLE
+              if o.group == group and o.name not in DEPRECATED]
+    cls = dataclasses.make_dataclass(name, fields, bases=(OptionGroup,), frozen=True, kw_only=True,
+                                     namespace={"group": group, "__post_init__": _check_group_values})
+    cls.__module__ = __name__
+    cls.__doc__ = f"{GROUPS[group]}: emu.Solver's options of the {group!r} group.\n" + _group_text(group)
+    return cls
+
+
+def _group_text(group: str) -> str:
+    import textwrap
+
+    out = []
+    for o in _TABLE:
+        if o.group == group:
+            out.append(f"    {o.name} = {o.default!r}")
+            out += textwrap.wrap(o.doc, 92, initial_indent=" " * 8, subsequent_indent=" " * 8)
+    return "\n".join(out)
+
+
+StoppingOptions = _group_class("StoppingOptions", "stopping")
+AccuracyOptions = _group_class("AccuracyOptions", "accuracy")
+NewtonOptions = _group_class("NewtonOptions", "newton")
+EmuOptions = _group_class("EmuOptions", "emu")
+FemOptions = _group_class("FemOptions", "fem")
+GROUP_CLASSES = (StoppingOptions, AccuracyOptions, NewtonOptions, EmuOptions, FemOptions)
+
+
+def merge_groups(groups, options: dict) -> dict:
+    """One {option: value} from option group objects and keyword options:
+    each group once, each option given once (TypeError naming it otherwise);
+    a group's fields at their default are left out (they change nothing and
+    need not apply to the method)."""
+    merged, seen = dict(options), set()
+    for g in groups:
+        if not isinstance(g, OptionGroup):
+            raise TypeError(f"options are passed by keyword or as option groups (emu.StoppingOptions(...), ...), "
+                            f"got {g!r}")
+        if type(g) in seen:
+            raise TypeError(f"{type(g).__name__} is given twice; pass one")
+        seen.add(type(g))
+        for name, v in g.given().items():
+            if name in merged:
+                raise TypeError(f"{name} is given twice (as a keyword and in {type(g).__name__}); give it once")
+            merged[name] = v
+    return merged
 
 
 def check_options(method: str, step: str, given: dict) -> None:
@@ -142,12 +230,47 @@ def check_options(method: str, step: str, given: dict) -> None:
                              "help(emu.Solver) and in docs/guide/options.md")
         if given[name] is o.default or given[name] == o.default:
             continue   # the default changes nothing, whatever the method
+        if o.choices and given[name] not in o.choices:
+            raise ValueError(f"{name} must be one of {', '.join(map(repr, o.choices))}, got {given[name]!r}")
         if method not in o.methods:
             raise ValueError(f"{name} is an option of {' and '.join(m.upper() for m in o.methods)} only; leave "
                              f"it out for method={method!r}")
         if o.steps is not None and method == "emu" and step not in o.steps:
             raise ValueError(f"{name} applies to EMU's {' or '.join(o.steps)} step only; leave it out for "
                              f"step={step!r}")
+
+
+def parse_option(text: str) -> tuple:
+    """(name, value) of a command-line ``NAME=VALUE`` (emu solve/run --option),
+    the value read as the table's type says: a number, true/false, none, or
+    one of the option's choices. ValueError naming the problem otherwise."""
+    name, eq, raw = text.partition("=")
+    name, raw = name.strip(), raw.strip()
+    if not eq or not name:
+        raise ValueError(f"--option takes NAME=VALUE (e.g. rtol_grad=1e-8), got {text!r}")
+    o = OPTIONS.get(name)
+    if o is None:
+        near = difflib.get_close_matches(name, OPTIONS, n=1)
+        raise ValueError(f"unknown solver option {name!r}" + (f" (did you mean {near[0]!r}?)" if near else "")
+                         + "; the options are listed in docs/guide/options.md")
+    types = o.type if isinstance(o.type, tuple) else (o.type,)
+    if raw.lower() == "none" and type(None) in types:
+        return name, None
+    if bool in types:
+        if raw.lower() in ("true", "on", "yes", "1"):
+            return name, True
+        if raw.lower() in ("false", "off", "no", "0"):
+            return name, False
+    for t in (int, float):
+        if t in types:
+            try:
+                return name, t(raw)
+            except ValueError:
+                pass
+    if str in types:
+        return name, raw
+    want = " or ".join("none" if t is type(None) else "true/false" if t is bool else t.__name__ for t in types)
+    raise ValueError(f"--option {name} takes {want}, got {raw!r}")
 
 
 def scene_file_types() -> dict:
@@ -165,37 +288,37 @@ def scene_file_types() -> dict:
 
 def solver_signature(init) -> inspect.Signature:
     """Solver.__init__'s signature from the table (help(), IDEs): self, scene,
-    method, then every option keyword-only with its default."""
-    params = list(inspect.signature(init).parameters.values())[:3]
+    method, *groups, then every option keyword-only with its default."""
+    params = list(inspect.signature(init).parameters.values())[:4]
     params += [inspect.Parameter(o.name, inspect.Parameter.KEYWORD_ONLY, default=o.default) for o in _TABLE]
     return inspect.Signature(params)
 
 
 def options_text() -> str:
     """The options as plain text by group (Solver's docstring)."""
-    import textwrap
-
+    classes = {c.group: c.__name__ for c in GROUP_CLASSES}
     out = ["", "    Options", "    -------"]
     for group, title in GROUPS.items():
-        out += ["", f"    {title}:"]
-        for o in _TABLE:
-            if o.group == group:
-                head = f"    {o.name} = {o.default!r}"
-                out.append(head)
-                out += textwrap.wrap(o.doc, 92, initial_indent=" " * 8, subsequent_indent=" " * 8)
+        out += ["", f"    {title}" + (f" (emu.{classes[group]}):" if group in classes else ":"), _group_text(group)]
     return "\n".join(out) + "\n"
 
 
 def options_markdown() -> str:
     """The options page (docs/guide/options.md): a table per group."""
     out = ["# Solver options", "",
-           "Every option of `emu.Solver(scene, method, **options)`, `emu.solve(...)` and a scene file's "
-           "`[solver]` table, by group. An option that does not apply to the method chosen is an error "
-           "naming it. Generated from `emu.options.OPTIONS` (`python -c \"from emu.options import "
+           "Every option of `emu.Solver(scene, method, **options)`, `emu.solve(...)`, a scene file's "
+           "`[solver]` table and `emu solve`/`emu run --option NAME=VALUE`, by group. An option that does not "
+           "apply to the method chosen is an error naming it. A group can also be built once as an object and "
+           "passed to several solvers, e.g. `emu.Solver(scene, \"emu\", emu.StoppingOptions(rtol_grad=1e-8), "
+           "emu.EmuOptions(step=\"lbfgs\"))`; its fields are the group's options below. Generated from `emu.options.OPTIONS` (`python -c \"from emu.options import "
            "options_markdown as m; print(m(), end='')\" > docs/guide/options.md`; a test keeps this page "
            "current).", ""]
+    classes = {c.group: c.__name__ for c in GROUP_CLASSES}
     for group, title in GROUPS.items():
-        out += [f"## {title}", "", "| option | default | methods | what it does |", "|---|---|---|---|"]
+        out += [f"## {title}", ""]
+        if group in classes:
+            out += [f"As an object: `emu.{classes[group]}(...)`.", ""]
+        out += ["| option | default | methods | what it does |", "|---|---|---|---|"]
         for o in _TABLE:
             if o.group != group:
                 continue
@@ -203,6 +326,8 @@ def options_markdown() -> str:
             if o.steps:
                 where += f" ({', '.join(o.steps)})"
             doc = o.doc.replace("|", "\\|")   # |g| inside a table cell
+            if o.choices:
+                doc += " Choices: " + ", ".join(f"`{c!r}`" for c in o.choices) + "."
             out.append(f"| `{o.name}` | `{o.default!r}` | {where} | {doc} |")
         out.append("")
     return "\n".join(out)

@@ -16,7 +16,8 @@ from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, DEFAULT_ACC
 from .checks import inverted_tets
 from .contact import ContactTerm
 from .geometry import bbox_diagonal, deformation_gradients, tet_vertices, vertex_error
-from .options import METHODS, OPTIONS, POSITION_TOL, check_options, options_text, solver_signature
+from .options import (CHOICES, METHODS, OPTIONS, POSITION_TOL, OptionGroup, check_options, merge_groups,
+                      options_text, solver_signature)
 from .lowering import build_model, declared_joint_rows, declared_joint_world, model_tet_order
 from .poses import parse_pose
 from .runtime import set_threads
@@ -30,10 +31,7 @@ class NeutralModeWarning(UserWarning):
     equilibrium is not unique (see Solution.neutral_modes)."""
 
 
-STEPS = ("newton-krylov", "woodbury", "lbfgs")
-# how the PSD-filtered element Hessian treats a negative eigenvalue (SolverOptions::eigen_filter order)
-EIGEN_FILTERS = ("clamp", "abs")
-PRECONDITIONERS = ("woodbury", "schur", "constant-schur")
+STEPS = CHOICES["step"]
 # EMU's strict solves (no accuracy) also stop when a full step moves no vertex
 # by more than POSITION_TOL x the bounding-box diagonal, once |g| <=
 # POSITION_TOL_GRAD |g_0|: with bones the gradient's round-off (the fit's
@@ -185,9 +183,12 @@ class Solver:
                   was built with (emu.lowering.tet_fibers); the scene is not changed
     """
 
-    def __init__(self, scene: Scene, method: str = "emu", **options):
+    def __init__(self, scene: Scene, method: str = "emu", *groups, **options):
+        if isinstance(method, OptionGroup):   # Solver(scene, emu.StoppingOptions(...)): the default method
+            method, groups = "emu", (method, *groups)
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        options = merge_groups(groups, options)
         check_options(method, options.get("step", OPTIONS["step"].default), options)
         self._setup(scene, method, **{**{n: o.default for n, o in OPTIONS.items()}, **options})
 
@@ -200,8 +201,6 @@ class Solver:
         """The Solver's setup, every option given (defaults from emu.options.OPTIONS)."""
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-        if step not in STEPS:
-            raise ValueError(f"step must be one of {STEPS}, got {step!r}")
         if method == "emu" and alpha is None and accuracy is None and step == "newton-krylov" and error_estimate:
             accuracy = DEFAULT_ACCURACY   # the default: an answer within 1% of FEM's, alpha chosen for it
         alpha = DEFAULT_ALPHA if alpha is None else alpha
@@ -232,9 +231,7 @@ class Solver:
         opts.rtol_grad, opts.rtol_energy = float(rtol_grad), float(rtol_energy)
         opts.noise_factor = float(noise_factor)
         opts.exact_when_definite = bool(exact_when_definite)
-        if eigen_filter not in EIGEN_FILTERS:
-            raise ValueError(f"eigen_filter must be one of {EIGEN_FILTERS}, got {eigen_filter!r}")
-        opts.eigen_filter = EIGEN_FILTERS.index(eigen_filter)
+        opts.eigen_filter = eigen_filter   # a choice's name, checked by the core (emu.options.CHOICES)
         opts.negative_curvature = bool(negative_curvature)
         if max_iterations is None:
             max_iterations = 200 if method == "fem" else {"newton-krylov": 500, "lbfgs": 5000}.get(step, 20000)
@@ -295,7 +292,7 @@ class Solver:
             eo = _core.EmuOptions()
             eo.alpha = float(alpha) * self.mu_ref
             eo.modes = int(modes)
-            eo.step = getattr(_core.EmuStep, step.replace("-", "_"))
+            eo.step = step
             eo.cg_max_iterations = int(cg_max_iterations)
             if not 0 <= cg_model_decrease <= 1:
                 raise ValueError(f"cg_model_decrease must lie in [0, 1] (0: the residual test alone), "
@@ -309,9 +306,7 @@ class Solver:
             if int(preconditioner_refresh) < 1:
                 raise ValueError(f"preconditioner_refresh must be >= 1, got {preconditioner_refresh}")
             eo.preconditioner_refresh = int(preconditioner_refresh)
-            if preconditioner not in PRECONDITIONERS:
-                raise ValueError(f"preconditioner must be one of {PRECONDITIONERS}, got {preconditioner!r}")
-            eo.preconditioner = getattr(_core.EmuPreconditioner, preconditioner.replace("-", "_"))
+            eo.preconditioner = preconditioner
             eo.bone_coarse_space = bool(bone_coarse_space)
             if int(recycled_directions) < 0:
                 raise ValueError(f"recycled_directions must be >= 0, got {recycled_directions}")
@@ -658,13 +653,14 @@ Solver.__init__.__signature__ = solver_signature(Solver.__init__)
 Solver.__doc__ += options_text()
 
 
-def solve(scene: Scene, activation=None, method: str = "emu", *, normalized: bool = False, gravity=None,
+def solve(scene: Scene, activation=None, method: str = "emu", *groups, normalized: bool = False, gravity=None,
           pin_positions=None, bone_poses=None, initial=None, on_iteration=None, record_iterates: bool = False,
           **options) -> Solution:
     """Build a Solver for ``scene`` and solve once: Solver(scene, method,
-    **options).solve(...) with the same arguments as Solver.solve (activation
-    absolute, or fractions of each muscle's maximum with normalized=True)."""
-    return Solver(scene, method, **options).solve(activation, normalized=normalized, gravity=gravity,
+    *groups, **options).solve(...) with the same arguments as Solver.solve
+    (activation absolute, or fractions of each muscle's maximum with
+    normalized=True)."""
+    return Solver(scene, method, *groups, **options).solve(activation, normalized=normalized, gravity=gravity,
                                                   pin_positions=pin_positions, bone_poses=bone_poses,
                                                   initial=initial, on_iteration=on_iteration,
                                                   record_iterates=record_iterates)

@@ -266,7 +266,7 @@ void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>*
   // A_u = V_t d2Psi/dF2 + d2E_C/dF2 (alpha w_t V_t I): PSD-filtered (A) and/or
   // unfiltered (A_exact); a bone's block is the coupling of all its tets
   // (rigid: no material).
-  const EigenFilter filter = options_.eigen_filter == 1 ? EigenFilter::Abs : EigenFilter::Clamp;
+  const EigenFilter filter = options_.eigen_filter;
   const int nu = layout_.num_unknowns, ns = layout_.num_soft;
   const auto& V = layout_.geometry.volume;
   const auto& wv = acap_->weight_volume();

@@ -83,7 +83,7 @@ void FemSolver::free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x,
 }
 
 void FemSolver::assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, bool exact) {
-  const EigenFilter filter = options_.eigen_filter == 1 ? EigenFilter::Abs : EigenFilter::Clamp;
+  const EigenFilter filter = options_.eigen_filter;
   const Eigen::Index m = model_.tets.rows();
   const auto& geo = layout_.geometry;
 #pragma omp parallel for schedule(static)

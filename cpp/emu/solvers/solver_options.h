@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 
 #include "emu/contact/position_term.h"
+#include "emu/energy/psd_project.h"
 
 namespace emu {
 
@@ -35,8 +36,8 @@ struct SolverOptions {
   bool step_tol_cold_scale = false;
   double armijo = 1e-4;        // sufficient-decrease constant
   int max_backtracks = 40;     // step halvings before the line search gives up
-  // Element Hessians: negative eigenvalues clamped (0) or reflected (1); see snh_eigensystem.h.
-  int eigen_filter = 0;
+  // Element Hessians: negative eigenvalues clamped or reflected (energy/psd_project.h).
+  EigenFilter eigen_filter = EigenFilter::Clamp;
   // Try the unfiltered Hessian first when it is positive definite (FEM: the
   // Cholesky succeeds; EMU: CG sees no negative curvature); fall back to the
   // filtered one. Restores Newton's quadratic end game.

@@ -33,6 +33,7 @@ from ..io.vtk import write_solution
 from ..runtime import info as runtime_info
 from ..runtime import set_threads
 from ..scenes import fusiform
+from ..options import CHOICES, OPTIONS, check_options, parse_option
 from ..solve import Solver
 from .demo import run_demo
 from .run import run_scene
@@ -238,6 +239,7 @@ def _data(args):
 
 
 def _solve(args):
+    options = _options(args)   # a mistyped option fails before the mesh is read
     if args.threads:
         set_threads(args.threads)
     scene = load_scene(mesh_path(args.mesh), free_bones=args.free_bones or (),
@@ -247,6 +249,10 @@ def _solve(args):
     kw = dict(alpha=args.alpha, step=args.step) if args.method == "emu" else {}
     if args.accuracy is not None:
         kw["accuracy"] = args.accuracy
+    for name, value in options.items():
+        if kw.get(name) is not None:
+            raise ValueError(f"{name} is given twice (--{name.replace('_', '-')} and --option); give it once")
+        kw[name] = value
     solver = Solver(scene, args.method, **kw)
     sol = solver.solve(act)
     print(sol.summary())
@@ -274,6 +280,9 @@ def _run(args):
         spec.solver["threads"] = args.threads
     if args.accuracy is not None:
         spec.solver["accuracy"] = args.accuracy
+    spec.solver.update(_options(args))
+    check_options(spec.solver.get("method", "emu"), spec.solver.get("step", OPTIONS["step"].default),
+                  {k: v for k, v in spec.solver.items() if k != "method"})
     if args.no_preview:
         spec.output["preview"] = False
     if args.usd:
@@ -316,6 +325,23 @@ def _mesh(args):
     return 0
 
 
+def _option_argument(p, more: str = ""):
+    p.add_argument("--option", "-O", action="append", default=[], metavar="NAME=VALUE",
+                   help="any solver option (docs/guide/options.md), e.g. -O rtol_grad=1e-8 -O eigen_filter=abs"
+                        + more)
+
+
+def _options(args) -> dict:
+    """{option: value} of the --option NAME=VALUE arguments (each once)."""
+    out = {}
+    for text in args.option:
+        name, value = parse_option(text)
+        if name in out:
+            raise ValueError(f"--option {name} is given twice; give it once")
+        out[name] = value
+    return out
+
+
 def _part_options(p):
     """--kind and --fibers: what a labelled mesh's parts are (emu.io.load_scene)."""
     p.add_argument("--kind", nargs="*", metavar="NAME=KIND",
@@ -333,7 +359,7 @@ def main(argv=None):
     d = sub.add_parser("demo", help="the built-in arm: a flexor then an extensor swing the forearm about the "
                                     "elbow; frames, PNG contact sheet, angle plot, EMU vs FEM")
     d.add_argument("--out", default="emu_out", help="output folder (default: emu_out)")
-    d.add_argument("--resolution", type=int, default=3, help="cells per arm block (default 3: 6.2k tets)")
+    d.add_argument("--resolution", type=int, default=3, help="the arm's mesh: 1 (1.8k tets), 2 (3.8k) or 3 (6.4k, the default); others are meshed once and cached")
     d.add_argument("--frames", type=int, default=25, help="frames over the 2 s sequence (default 25)")
     d.add_argument("--alpha", type=float, default=None,
                    help="EMU alpha relative to the muscles' shear modulus, fixed (default: chosen for --accuracy)")
@@ -359,7 +385,7 @@ def main(argv=None):
     s.add_argument("--absolute-activation", nargs="*", metavar="NAME=A",
                    help="absolute activations (the stress a fully shortened fibre adds, in the mesh's units)")
     s.add_argument("--method", choices=["emu", "fem"], default="emu")
-    s.add_argument("--step", choices=["newton-krylov", "woodbury", "lbfgs"], default="newton-krylov")
+    s.add_argument("--step", choices=CHOICES["step"], default=CHOICES["step"][0])
     s.add_argument("--alpha", type=float, default=None,
                    help="EMU alpha relative to the softest muscle's shear modulus, fixed (default: chosen for "
                         "--accuracy, 0.01 unless --alpha is given)")
@@ -367,6 +393,7 @@ def main(argv=None):
                    help="vertex error to FEM wanted (0.01: 1%% of the diagonal): picks alpha, stops when steps no "
                         "longer matter")
     s.add_argument("--threads", type=int, default=None)
+    _option_argument(s)
     s.add_argument("--out", default=None, help="write the result here (.vtu) and a preview picture beside it (.png)")
     s.add_argument("--no-preview", action="store_true", help="with --out: do not write the preview picture")
     s.set_defaults(func=_solve)
@@ -376,6 +403,7 @@ def main(argv=None):
     r.add_argument("--threads", type=int, default=None)
     r.add_argument("--accuracy", type=float, default=None,
                    help="override the scene file's solver.accuracy (vertex error to FEM wanted, e.g. 0.01)")
+    _option_argument(r, "; overrides the scene file's [solver] table")
     r.add_argument("--no-preview", action="store_true", help="do not write preview.png (output.preview = false)")
     r.add_argument("--usd", action="store_true", help="also write run.usd, one animated USD stage (output.usd = "
                                                       "true; needs pip install emu[usd])")
