@@ -8,7 +8,10 @@
 #include "check.h"
 #include "emu/mesh/block_pattern.h"
 #include "emu/mesh/spatial_order.h"
+#include "emu/linalg/rotation.h"
+#include "emu/energy/joint_spring.h"
 #include "emu/solvers/bone_coarse_space.h"
+#include "emu/solvers/bone_rotations.h"
 #include "emu/solvers/emu_solver.h"
 #include "emu/solvers/fem_solver.h"
 
@@ -21,6 +24,49 @@ LoadCase load(double a) {
   return l;
 }
 }  // namespace
+
+// The joint spring E(R) = k/2 (3 - tr R) is linear in R: its Euclidean
+// Hessian is zero and its Riemannian Hessian is the curvature term alone.
+// Along R exp(t [w]x): d2E/dt2 at 0 = <v, Hess[v]> with v = R [w]x.
+TEST(riemannian_hessian_of_the_joint_spring_matches_finite_differences) {
+  const double k = 3.0, h = 1e-4;
+  const Mat3 G = joint_spring::gradient(k);
+  for (double angle : {0.3, 2.9}) {
+    const Mat3 R = rotation_exp(angle * Vec3(1, 2, 2).normalized());
+    for (const Vec3& w : {Vec3(1, 0, 0), Vec3(0.3, -1, 0.5), Vec3(1, 2, 2).normalized()}) {
+      const Mat3 V = R * cross_matrix(w);
+      const double fd = (joint_spring::energy(R * rotation_exp(h * w), k) - 2 * joint_spring::energy(R, k) +
+                         joint_spring::energy(R * rotation_exp(-h * w), k)) / (h * h);
+      const Mat3 exact = bone_rotations::riemannian_block(R, G, V, Mat3::Zero(), true, 0.0);
+      CHECK_CLOSE((V.cwiseProduct(exact)).sum(), fd, 1e-6 * std::max(1.0, std::abs(fd)));
+      CHECK((R.transpose() * exact + (R.transpose() * exact).transpose()).norm() < 1e-12);  // tangent
+      // The filtered form keeps the spring's curvature clamped PSD: equal
+      // where it is convex (small turns), never negative.
+      const Mat3 filtered = bone_rotations::riemannian_block(R, Mat3::Zero(), V, Mat3::Zero(), false, k);
+      CHECK(V.cwiseProduct(filtered).sum() >= -1e-12);
+      if (angle < 1.0) CHECK((filtered - exact).norm() < 1e-10 * k);
+    }
+  }
+}
+
+TEST(bone_columns_are_projected_and_retracted_onto_rotations) {
+  const int num_soft = 2;
+  Mat9X F = Mat9X::Random(9, 4), d = Mat9X::Random(9, 4);
+  F.col(2) = flatten(rotation_exp(Vec3(0.1, 0.2, 0.3)));
+  F.col(3) = flatten(rotation_exp(Vec3(-1.0, 0.5, 2.0)));
+  Mat9X v = d;
+  bone_rotations::project_tangent(F, num_soft, v);
+  CHECK((v.leftCols(num_soft) - d.leftCols(num_soft)).norm() == 0.0);  // soft columns untouched
+  Mat9X out;
+  bone_rotations::retract(F, v, 0.5, num_soft, out);
+  CHECK((out.leftCols(num_soft) - (F + 0.5 * v).leftCols(num_soft)).norm() < 1e-15);
+  for (int u = num_soft; u < 4; ++u) {
+    const Mat3 R = unflatten(F.col(u)), K = R.transpose() * unflatten(v.col(u));
+    CHECK((K + K.transpose()).norm() < 1e-12);
+    const Mat3 Q = unflatten(out.col(u));
+    CHECK((Q.transpose() * Q - Mat3::Identity()).norm() < 1e-12 && Q.determinant() > 0);
+  }
+}
 
 TEST(block_assembly_matches_dense_assembly) {
   const Model m = bar(2, 3);

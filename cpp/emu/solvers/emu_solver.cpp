@@ -13,6 +13,7 @@
 #include "emu/energy/material.h"
 #include "emu/linalg/rotation.h"
 #include "emu/solvers/bone_coarse_space.h"
+#include "emu/solvers/bone_rotations.h"
 #include "emu/solvers/newton/newton_driver.h"
 #include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
@@ -170,43 +171,17 @@ void EmuSolver::fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd)
 }
 
 void EmuSolver::project_tangent(const Mat9X& F, Mat9X& v) const {
-  for (int u = layout_.num_soft; u < layout_.num_unknowns; ++u)
-    v.col(u) = flatten(project_to_tangent(unflatten(F.col(u)), unflatten(v.col(u))));
+  bone_rotations::project_tangent(F, layout_.num_soft, v);
 }
 
 void EmuSolver::retract(const Mat9X& F, const Mat9X& d, double s, Mat9X& out) const {
-  out = F + s * d;
-  for (int u = layout_.num_soft; u < layout_.num_unknowns; ++u) out.col(u) = flatten(nearest_rotation(unflatten(out.col(u))));
+  bone_rotations::retract(F, d, s, layout_.num_soft, out);
 }
 
 void EmuSolver::riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                                    bool curvature, Mat9X& out) const {
   hessian_product_into(A, v, out);
-  riemannian_columns(F, g, v, curvature, out);
-}
-
-void EmuSolver::riemannian_columns(const Mat9X& F, const Mat9X& g, const Mat9X& v, bool curvature,
-                                   Mat9X& out) const {
-  for (int u = layout_.num_soft; u < layout_.num_unknowns; ++u) {
-    const Mat3 R = unflatten(F.col(u));
-    Mat3 M = unflatten(out.col(u));
-    if (curvature) {
-      const Mat3 RtG = R.transpose() * unflatten(g.col(u));
-      M -= unflatten(v.col(u)) * (0.5 * (RtG + RtG.transpose()));
-    } else if (const int b = u - layout_.num_soft; b < model_.bone_stiffness.size() && model_.bone_stiffness(b) > 0) {
-      // The joint spring's whole curvature is this term (its Euclidean Hessian
-      // is zero): kept, clamped PSD, so filtered steps feel the spring.
-      // For v = R [w]x it is R [C w / 2]x, C = k/2 (tr R I - sym R).
-      const Mat3 C = joint_spring::expmap_hessian(R, model_.bone_stiffness(b));
-      Eigen::SelfAdjointEigenSolver<Mat3> eig(C);
-      const Mat3 Cp = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
-                      eig.eigenvectors().transpose();
-      const Mat3 W = R.transpose() * unflatten(v.col(u));
-      const Vec3 w(0.5 * (W(2, 1) - W(1, 2)), 0.5 * (W(0, 2) - W(2, 0)), 0.5 * (W(1, 0) - W(0, 1)));
-      M += R * cross_matrix(0.5 * (Cp * w));
-    }
-    out.col(u) = flatten(project_to_tangent(R, M));
-  }
+  bone_rotations::riemannian_columns(F, g, v, curvature, layout_.num_soft, model_.bone_stiffness, out);
 }
 
 double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
@@ -691,7 +666,7 @@ class EmuSolver::Newton {
             s_.bone_turns_into<3>(H, b, M, Z, HZ);  // the three turns in one pass over H's blocks
             for (int k = 0; k < 3; ++k) {
               if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
-              else s_.riemannian_columns(F_, g_, Z[k], exact, HZ[k]);
+              else bone_rotations::riemannian_columns(F_, g_, Z[k], exact, s_.layout_.num_soft, s_.model_.bone_stiffness, HZ[k]);
             }
           },
           product, recycled_);

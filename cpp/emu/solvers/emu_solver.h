@@ -13,11 +13,8 @@
 // Never a factorisation after setup.
 //
 // Movable bones: all tets of bone b share one unknown F_b, kept a rotation
-// (rigid: no elastic energy). Steps for F_b lie in the tangent space
-// {omega^ R}; the line search retracts R + s d to the nearest rotation (polar
-// decomposition), and the Newton Hessian is the Riemannian one on SO(3):
-//   Hess[v] = P_T(H v - v sym(R^T g)),  P_T(M) = R skew(R^T M).
-// The gradient norm reported and tested is the Riemannian one (bone blocks
+// (rigid: no elastic energy); steps, retraction and the Riemannian Hessian
+// on SO(3) are in bone_rotations.h. The gradient norm reported and tested is the Riemannian one (bone blocks
 // projected to the tangent space): the normal part is the rigidity reaction.
 //
 // Unknowns: one per soft tet (tet order), then one per bone; the diagnostic
@@ -153,14 +150,12 @@ class EmuSolver {
                        std::array<Mat9X, N>& HZ) const;
   void fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const;
   void fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const;
-  // Bones: tangent projection of the bone columns of v at F; F + s d retracted to rotations.
+  // Bones on SO(3) (bone_rotations.h): tangent projection of v's bone columns
+  // at F; F + s d retracted to rotations; the Riemannian Hessian product.
   void project_tangent(const Mat9X& F, Mat9X& v) const;
   void retract(const Mat9X& F, const Mat9X& d, double s, Mat9X& out) const;
-  // Riemannian Hessian product: bone columns P_T(Hv - v sym(R^T g)).
   void riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                           bool curvature, Mat9X& out) const;
-  // Its bone columns from the Euclidean product Hv in out.
-  void riemannian_columns(const Mat9X& F, const Mat9X& g, const Mat9X& v, bool curvature, Mat9X& out) const;
   Mat9X to_cols(const Eigen::MatrixXd& rows) const;
   // Contact (SolverOptions::contact) on the fitted positions x = x*(F):
   //   E_c(x*(F)),  dE_c/dF = C^T K_c^-1 S^T g_x  (one back-substitution),
