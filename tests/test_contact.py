@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import emu
+from emu._core import testing
 from emu.contact import ContactSettings, ContactTerm
 from emu.geometry import boundary_faces
 
@@ -202,11 +203,11 @@ def test_emu_contact_gradient_and_hessian_through_the_fit(scene_name):
     rng = np.random.default_rng(2)
     V = rng.standard_normal(F.shape)          # every unknown, the forearm's F too
     V *= 1e-6 / np.abs(V).max()
-    g = core.gradient(load, F)
-    fd = (core.energy(load, F + V) - core.energy(load, F - V)) / 2
+    g = testing.gradient(core, load, F)
+    fd = (testing.energy(core, load, F + V) - testing.energy(core, load, F - V)) / 2
     assert fd == pytest.approx((g * V).sum(), rel=1e-4)
-    Hv = core.hessian_product(load, F, V, True)
-    fd_H = (core.gradient(load, F + V) - core.gradient(load, F - V)) / 2
+    Hv = testing.hessian_product(core, load, F, V, True)
+    fd_H = (testing.gradient(core, load, F + V) - testing.gradient(core, load, F - V)) / 2
     # the soft rows (a bone's gradient row sums its tets' ACAP terms at weight 1e4:
     # its differences cancel to 1e-10 with contact or without)
     soft = len(scene.model_tets) - sum(len(scene.parts[b].tets) for b in scene.movable_bones)
@@ -214,7 +215,7 @@ def test_emu_contact_gradient_and_hessian_through_the_fit(scene_name):
     assert np.abs(fd_H - Hv)[:soft].max() <= 1e-6 * scale
     # the contact term is a real share of the product: without it the check fails
     solver.contact.hessian = lambda x: ipctk_zero(3 * len(x))
-    Hv0 = core.hessian_product(load, F, V, True)
+    Hv0 = testing.hessian_product(core, load, F, V, True)
     assert np.abs(fd_H - Hv0)[:soft].max() > 1e-3 * scale
 
 

@@ -17,22 +17,23 @@
 #include "emu/solvers/acap.h"
 #include "emu/solvers/constant_schur.h"
 #include "emu/solvers/emu_solver.h"
+#include "emu/solvers/emu_solver_testing.h"
 #include "emu/solvers/newton/pcg.h"
 #include "emu/solvers/woodbury.h"
 
 namespace emu {
 
-/// Access to the solver's kernels (a friend of EmuSolver).
-struct EmuSolverProbe {
-  explicit EmuSolverProbe(const Model& m) {
+/// A solver and its kernels, reached through EmuSolverTesting.
+struct CgKernels {
+  explicit CgKernels(const Model& m) {
     EmuOptions eo;
     eo.alpha = 100.0 * m.mu(0);
     eo.preconditioner = EmuPreconditioner::Woodbury;  // its modes; the constant Schur one is built beside it
     solver = std::make_unique<EmuSolver>(m, SolverOptions(), eo);
-    constant_schur = std::make_unique<ConstantSchur>(solver->model_, solver->layout_, *solver->acap_, eo.alpha);
+    constant_schur = std::make_unique<ConstantSchur>(EmuSolverTesting::model(*solver), EmuSolverTesting::layout(*solver), EmuSolverTesting::acap(*solver), eo.alpha);
     constant_schur_double =
-        std::make_unique<ConstantSchur>(solver->model_, solver->layout_, *solver->acap_, eo.alpha, false);
-    const long n = solver->layout_.num_unknowns;
+        std::make_unique<ConstantSchur>(EmuSolverTesting::model(*solver), EmuSolverTesting::layout(*solver), EmuSolverTesting::acap(*solver), eo.alpha, false);
+    const long n = EmuSolverTesting::layout(*solver).num_unknowns;
     std::mt19937 rng(2);
     std::normal_distribution<double> g(0.0, 0.05);
     Eigen::MatrixXd F(n, 9);
@@ -40,31 +41,31 @@ struct EmuSolverProbe {
       for (int i = 0; i < 9; ++i) F(u, i) = (i % 4 == 0 ? 1.0 : 0.0) + g(rng);
     LoadCase load;
     load.activation = Eigen::VectorXd::Constant(1, 1e4);
-    const Eigen::MatrixXd blocks = solver->block_hessians(load, F, false);
+    const Eigen::MatrixXd blocks = EmuSolverTesting::block_hessians(*solver, load, F, false);
     A.resize(n);
     for (long u = 0; u < n; ++u)
       for (int i = 0; i < 81; ++i) A[u].data()[i] = blocks(u, i);  // a row: the column-major 9x9 block
-    if (!solver->woodbury_->update(A)) throw std::runtime_error("bench_cg: the Woodbury matrix X is not definite");
+    if (!EmuSolverTesting::woodbury(*solver).update(A)) throw std::runtime_error("bench_cg: the Woodbury matrix X is not definite");
     if (!constant_schur->update(A) || !constant_schur_double->update(A))
       throw std::runtime_error("bench_cg: a block is not definite");
     v = Mat9X::Zero(9, n);
     for (long i = 0; i < v.size(); ++i) v.data()[i] = g(rng);
   }
-  void product(const Mat9X& in, Mat9X& out) const { solver->hessian_product_into(A, in, out); }
+  void product(const Mat9X& in, Mat9X& out) const { EmuSolverTesting::hessian_product_into(*solver, A, in, out); }
   void fit(const Mat9X& in) {
-    solver->fit_linear_into(in, dx, Fd);
+    EmuSolverTesting::fit_linear_into(*solver, in, dx, Fd);
   }
   /// which: 0 the Woodbury preconditioner, 1 the constant Schur one (single
   /// precision S0 and blocks, the default), 2 the constant Schur one in double
   void precondition(const Mat9X& in, Mat9X& out, int which = 0) const {
     if (which == 1) constant_schur->apply(in, out);
     else if (which == 2) constant_schur_double->apply(in, out);
-    else solver->woodbury_->apply(in, out);
+    else EmuSolverTesting::woodbury(*solver).apply(in, out);
   }
-  void back_substitution(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& Z) const { solver->acap_->solve(rhs, Z); }
-  long position_dofs() const { return solver->acap_->dofs(); }
-  long unknowns() const { return solver->layout_.num_unknowns; }
-  int modes() const { return solver->woodbury_->k(); }
+  void back_substitution(const Eigen::MatrixXd& rhs, Eigen::MatrixXd& Z) const { EmuSolverTesting::acap(*solver).solve(rhs, Z); }
+  long position_dofs() const { return EmuSolverTesting::acap(*solver).dofs(); }
+  long unknowns() const { return EmuSolverTesting::layout(*solver).num_unknowns; }
+  int modes() const { return EmuSolverTesting::woodbury(*solver).k(); }
 
   std::unique_ptr<EmuSolver> solver;
   std::unique_ptr<ConstantSchur> constant_schur, constant_schur_double;
@@ -83,12 +84,12 @@ namespace {
 // cost of a parallel pass shows; 2 = 12 x 12 x 93, 80,352 tets
 // (fusiform_80k's size): every per-tet array streams from memory. Each is
 // built on first use.
-EmuSolverProbe& probe(int size) {
+CgKernels& probe(int size) {
   if (size == 2) {
-    static EmuSolverProbe huge(bar(12, 93));
+    static CgKernels huge(bar(12, 93));
     return huge;
   }
-  static EmuSolverProbe large(bar(8, 45)), small(bar(5, 28));
+  static CgKernels large(bar(8, 45)), small(bar(5, 28));
   return size == 0 ? large : small;
 }
 
@@ -117,7 +118,7 @@ void report(benchmark::State& state, double per_tet) {
 }
 
 void fit(benchmark::State& state) {
-  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
+  CgKernels& p = probe(static_cast<int>(state.range(0)));
   for (auto _ : state) {
     p.fit(p.v);
     benchmark::DoNotOptimize(p.Fd.data());
@@ -126,7 +127,7 @@ void fit(benchmark::State& state) {
 }
 
 void back_substitution(benchmark::State& state) {
-  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
+  CgKernels& p = probe(static_cast<int>(state.range(0)));
   // The ACAP fit's solve: K_c^-1 R with 3 right-hand sides (L (x) I3).
   const Eigen::MatrixXd rhs = Eigen::MatrixXd::Random(p.position_dofs(), 3);
   Eigen::MatrixXd Z;
@@ -140,7 +141,7 @@ void back_substitution(benchmark::State& state) {
 }
 
 void hessian_product(benchmark::State& state) {
-  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
+  CgKernels& p = probe(static_cast<int>(state.range(0)));
   Mat9X out;
   for (auto _ : state) {
     p.product(p.v, out);
@@ -150,7 +151,7 @@ void hessian_product(benchmark::State& state) {
 }
 
 void woodbury_apply(benchmark::State& state) {
-  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
+  CgKernels& p = probe(static_cast<int>(state.range(0)));
   Mat9X out;
   for (auto _ : state) {
     p.precondition(p.v, out);
@@ -163,7 +164,7 @@ void woodbury_apply(benchmark::State& state) {
 // state.range(1): 1 single precision (S0's factor and the blocks, the
 // default), 2 double
 void constant_schur_apply(benchmark::State& state) {
-  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
+  CgKernels& p = probe(static_cast<int>(state.range(0)));
   const int which = static_cast<int>(state.range(1));
   Mat9X out;
   for (auto _ : state) {
@@ -177,7 +178,7 @@ void constant_schur_apply(benchmark::State& state) {
 // state.range(1): the preconditioner (0 Woodbury, 1 constant Schur, 2 the
 // constant Schur one in double).
 void cg_iteration(benchmark::State& state) {
-  EmuSolverProbe& p = probe(static_cast<int>(state.range(0)));
+  CgKernels& p = probe(static_cast<int>(state.range(0)));
   const int which = static_cast<int>(state.range(1));
   Pcg<Mat9X> pcg;
   Mat9X d;

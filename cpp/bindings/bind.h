@@ -5,5 +5,6 @@ namespace emu::bindings {
 void bind_energy(pybind11::module_& m);
 void bind_linalg(pybind11::module_& m);
 void bind_mesh(pybind11::module_& m);
+void bind_model(pybind11::module_& m);
 void bind_solvers(pybind11::module_& m);
 }  // namespace emu::bindings

@@ -6,6 +6,7 @@
 #include "bind.h"
 #include "emu/model/model.h"
 #include "emu/solvers/emu_solver.h"
+#include "emu/solvers/emu_solver_testing.h"
 #include "emu/solvers/fem_solver.h"
 #include "emu/solvers/option_choices.h"
 
@@ -113,32 +114,6 @@ Eigen::MatrixXd history_array(const SolveResult& r) {
 }  // namespace
 
 void bind_solvers(py::module_& m) {
-  py::class_<Model>(m, "Model")
-      .def(py::init<>())
-      .def_readwrite("rest", &Model::rest)
-      .def_readwrite("tets", &Model::tets)
-      .def_readwrite("mu", &Model::mu)
-      .def_readwrite("lam", &Model::lambda)
-      .def_readwrite("density", &Model::density)
-      .def_readwrite("acap_weight", &Model::acap_weight)
-      .def_readwrite("fiber", &Model::fiber)
-      .def_readwrite("muscle", &Model::muscle)
-      .def_readwrite("pinned", &Model::pinned)
-      .def_readwrite("num_muscles", &Model::num_muscles)
-      .def_readwrite("bone", &Model::bone, "#T movable-bone id per tet, -1 for soft tissue (empty: no bones)")
-      .def_readwrite("num_bones", &Model::num_bones)
-      .def_readwrite("joint_points", &Model::joint_points)
-      .def_readwrite("joint_bones", &Model::joint_bones)
-      .def_readwrite("bone_stiffness", &Model::bone_stiffness)
-      .def("validate", &Model::validate);
-
-  py::class_<LoadCase>(m, "LoadCase")
-      .def(py::init<>())
-      .def_readwrite("activation", &LoadCase::activation)
-      .def_readwrite("pin_positions", &LoadCase::pin_positions)
-      .def_readwrite("gravity", &LoadCase::gravity)
-      .def_readwrite("joint_targets", &LoadCase::joint_targets);
-
   py::class_<SolverOptions>(m, "SolverOptions")
       .def(py::init<>())
       .def_readwrite("max_iterations", &SolverOptions::max_iterations)
@@ -309,23 +284,7 @@ void bind_solvers(py::module_& m) {
             return run_solve([&] { return s.solve(l, &F0); });
           },
           py::arg("load"), py::arg("F0"), py::arg("on_iteration") = py::none())
-      .def("energy", &EmuSolver::energy, py::arg("load"), py::arg("F"), gil())
-      .def("gradient", &EmuSolver::gradient, py::arg("load"), py::arg("F"), gil())
-      .def("fit_positions", &EmuSolver::fit_positions, py::arg("load"), py::arg("F"), gil())
-      .def("bone_turn", &EmuSolver::bone_turn, py::arg("load"), py::arg("F"), py::arg("bone"), py::arg("M"),
-           py::arg("exact") = false, gil(),
-           "(Z, H Z): the bone coarse space's turn of a movable bone by the tangent M, from its unit-turn fits")
-      .def("hessian_product", &EmuSolver::hessian_product, py::arg("load"), py::arg("F"), py::arg("V"),
-           py::arg("exact") = false, gil())
-      .def("woodbury_solve", &EmuSolver::woodbury_solve, py::arg("load"), py::arg("F"), py::arg("R"), gil())
-      .def("schur_solve", &EmuSolver::schur_solve, py::arg("load"), py::arg("F"), py::arg("R"), gil())
-      .def("constant_schur_solve", &EmuSolver::constant_schur_solve, py::arg("load"), py::arg("F"), py::arg("R"),
-           gil())
-      .def("block_hessians", &EmuSolver::block_hessians, py::arg("load"), py::arg("F"), py::arg("exact") = false,
-           gil())
-      .def("mode_matrix", &EmuSolver::mode_matrix)
       .def("structures", &EmuSolver::structures, "(name, bytes) of the structures this solver built")
-      .def("mode_values", &EmuSolver::mode_values)
       .def_property_readonly("modes", &EmuSolver::modes)
       .def_property_readonly("num_unknowns", &EmuSolver::num_unknowns)
       .def_property_readonly("tet_unknown", &EmuSolver::tet_unknown, "#T: the F unknown each tet uses (soft tets in order, then one per movable bone)")
@@ -336,5 +295,27 @@ void bind_solvers(py::module_& m) {
       .def_property_readonly("modes_seconds", &EmuSolver::modes_seconds)
       .def_property_readonly("setup_seconds", &EmuSolver::setup_seconds)
       .def_property_readonly("factor_nnz", &EmuSolver::factor_nnz);
+
+  // EmuSolver's pieces one at a time (emu_solver_testing.h): tests and diagnostics only.
+  py::module_ t = m.def_submodule("testing", "EmuSolver's pieces one at a time, for tests and diagnostics");
+  t.def("energy", &EmuSolverTesting::energy, py::arg("solver"), py::arg("load"), py::arg("F"), gil());
+  t.def("gradient", &EmuSolverTesting::gradient, py::arg("solver"), py::arg("load"), py::arg("F"), gil(),
+        "the Euclidean gradient, #unknowns by 9");
+  t.def("fit_positions", &EmuSolverTesting::fit_positions, py::arg("solver"), py::arg("load"), py::arg("F"), gil());
+  t.def("hessian_product", &EmuSolverTesting::hessian_product, py::arg("solver"), py::arg("load"), py::arg("F"),
+        py::arg("V"), py::arg("exact") = false, gil());
+  t.def("block_hessians", &EmuSolverTesting::block_hessians, py::arg("solver"), py::arg("load"), py::arg("F"),
+        py::arg("exact") = false, gil());
+  t.def("woodbury_solve", &EmuSolverTesting::woodbury_solve, py::arg("solver"), py::arg("load"), py::arg("F"),
+        py::arg("R"), gil());
+  t.def("schur_solve", &EmuSolverTesting::schur_solve, py::arg("solver"), py::arg("load"), py::arg("F"),
+        py::arg("R"), gil());
+  t.def("constant_schur_solve", &EmuSolverTesting::constant_schur_solve, py::arg("solver"), py::arg("load"),
+        py::arg("F"), py::arg("R"), gil());
+  t.def("bone_turn", &EmuSolverTesting::bone_turn, py::arg("solver"), py::arg("load"), py::arg("F"), py::arg("bone"),
+        py::arg("M"), py::arg("exact") = false, gil(),
+        "(Z, H Z): the bone coarse space's turn of a movable bone by the tangent M, from its unit-turn fits");
+  t.def("mode_matrix", &EmuSolverTesting::mode_matrix, py::arg("solver"));
+  t.def("mode_values", &EmuSolverTesting::mode_values, py::arg("solver"));
 }
 }  // namespace emu::bindings

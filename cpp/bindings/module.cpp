@@ -7,5 +7,6 @@ PYBIND11_MODULE(_core, m) {
   emu::bindings::bind_energy(m);
   emu::bindings::bind_linalg(m);
   emu::bindings::bind_mesh(m);
+  emu::bindings::bind_model(m);
   emu::bindings::bind_solvers(m);
 }

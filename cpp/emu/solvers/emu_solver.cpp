@@ -24,15 +24,6 @@ namespace {
 double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
 }  // namespace
 
-struct EmuSolver::Context {
-  Eigen::VectorXd act;         // #T activation
-  Eigen::MatrixX3d x_pinned;   // #V by 3: pinned rows at targets, other rows zero
-  Mat9X F_pinned;              // F_t(x_pinned)
-  Eigen::MatrixX3d h;          // joint targets
-  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
-  bool has_gravity = false;
-  Mat9X F_gravity;             // F_t(L^-1 f): the load's share of the gradient
-};
 
 EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options)
     : model_((model.validate(), model)), layout_(model_), options_(options), emu_(emu_options) {
@@ -353,35 +344,11 @@ void EmuSolver::bone_turns_into(const std::vector<Mat9>& A, int b, const std::ar
   }
 }
 
-template <int N>
-std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, N> EmuSolver::turns_at(const LoadCase& load,
-                                                                               const Eigen::MatrixXd& Frows, int bone,
-                                                                               const std::array<Mat3, N>& M,
-                                                                               bool exact) const {
-  if (bone < 0 || bone >= static_cast<int>(turn_fits_.size()))
-    throw std::invalid_argument("bone_turn: bone " + std::to_string(bone) + " is not a movable bone of a solver " +
-                                "with the bone coarse space (" + std::to_string(turn_fits_.size()) + " such bones)");
-  const Context c = make_context(load);
-  std::vector<Mat9> A, A_exact;
-  blocks_into(c, to_cols(Frows), &A, &A_exact);
-  std::array<Mat9X, N> Z, HZ;  // the coarse space's path
-  bone_turns_into<N>(exact ? A_exact : A, bone, M, Z, HZ);
-  std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, N> out;
-  for (int k = 0; k < N; ++k) out[k] = {Z[k].transpose(), HZ[k].transpose()};
-  return out;
-}
-
-std::pair<Eigen::MatrixXd, Eigen::MatrixXd> EmuSolver::bone_turn(const LoadCase& load, const Eigen::MatrixXd& Frows,
-                                                                 int bone, const Eigen::Matrix3d& M,
-                                                                 bool exact) const {
-  return turns_at<1>(load, Frows, bone, {M}, exact)[0];
-}
-
-std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, 3> EmuSolver::bone_turns(
-    const LoadCase& load, const Eigen::MatrixXd& Frows, int bone, const std::array<Eigen::Matrix3d, 3>& M,
-    bool exact) const {
-  return turns_at<3>(load, Frows, bone, M, exact);
-}
+// The coarse space's rebuild (N = 3) and EmuSolverTesting's single turn (N = 1).
+template void EmuSolver::bone_turns_into<1>(const std::vector<Mat9>&, int, const std::array<Mat3, 1>&,
+                                            std::array<Mat9X, 1>&, std::array<Mat9X, 1>&) const;
+template void EmuSolver::bone_turns_into<3>(const std::vector<Mat9>&, int, const std::array<Mat3, 3>&,
+                                            std::array<Mat9X, 3>&, std::array<Mat9X, 3>&) const;
 
 Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
   if (rows.rows() != layout_.num_unknowns || rows.cols() != 9)
@@ -432,101 +399,6 @@ void EmuSolver::add_position_hessian_product(const Eigen::SparseMatrix<double>& 
   Mat9X add;
   position_force_to_unknowns(f, add);
   out += add;
-}
-
-double EmuSolver::energy(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
-  const Context c = make_context(load);
-  const Mat9X F = to_cols(Frows);
-  Eigen::MatrixX3d x;
-  Mat9X Fx;
-  fit_into(c, F, x, Fx);
-  double E = energy_along(c, F, Fx, nullptr, nullptr, 0.0);
-  E -= load_work(c, x);
-  return E + contact_energy(x);
-}
-
-Eigen::MatrixXd EmuSolver::gradient(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
-  const Context c = make_context(load);
-  const Mat9X F = to_cols(Frows);
-  Eigen::MatrixX3d x;
-  Mat9X Fx, g;
-  fit_into(c, F, x, Fx);
-  gradient_into(c, F, Fx, g);
-  add_contact_gradient(x, g);
-  return g.transpose();
-}
-
-Eigen::MatrixX3d EmuSolver::fit_positions(const LoadCase& load, const Eigen::MatrixXd& Frows) const {
-  const Context c = make_context(load);
-  Eigen::MatrixX3d x;
-  Mat9X Fx;
-  fit_into(c, to_cols(Frows), x, Fx);
-  return x;
-}
-
-Eigen::MatrixXd EmuSolver::hessian_product(const LoadCase& load, const Eigen::MatrixXd& Frows,
-                                           const Eigen::MatrixXd& Vrows, bool exact) const {
-  const Context c = make_context(load);
-  std::vector<Mat9> A, A_exact;
-  const Mat9X F = to_cols(Frows), V = to_cols(Vrows);
-  blocks_into(c, F, &A, &A_exact);
-  Mat9X out;
-  hessian_product_into(exact ? A_exact : A, V, out);
-  if (has_contact()) {  // J^T H_c J v at the fit of F
-    Eigen::MatrixX3d x;
-    Mat9X Fx;
-    fit_into(c, F, x, Fx);
-    add_position_hessian_product(options_.contact.checked_hessian(x), V, out);
-  }
-  return out.transpose();
-}
-
-Eigen::MatrixXd EmuSolver::woodbury_solve(const LoadCase& load, const Eigen::MatrixXd& Frows,
-                                          const Eigen::MatrixXd& Rrows) const {
-  const Context c = make_context(load);
-  std::vector<Mat9> A;
-  blocks_into(c, to_cols(Frows), &A, nullptr);
-  Woodbury w = *woodbury_;
-  if (!w.update(A)) throw std::runtime_error("Woodbury system X is not positive definite");
-  Mat9X out;
-  w.apply(to_cols(Rrows), out);
-  return out.transpose();
-}
-
-Eigen::MatrixXd EmuSolver::schur_solve(const LoadCase& load, const Eigen::MatrixXd& Frows,
-                                       const Eigen::MatrixXd& Rrows) {
-  if (!schur_) throw std::invalid_argument("this solver has no Schur-complement preconditioner (preconditioner='schur')");
-  return preconditioner_solve(*schur_, load, Frows, Rrows, "the Schur complement S is not positive definite");
-}
-
-Eigen::MatrixXd EmuSolver::constant_schur_solve(const LoadCase& load, const Eigen::MatrixXd& Frows,
-                                                const Eigen::MatrixXd& Rrows) {
-  if (!constant_schur_)
-    throw std::invalid_argument(
-        "this solver has no constant Schur preconditioner (preconditioner='constant-schur')");
-  return preconditioner_solve(*constant_schur_, load, Frows, Rrows, "a filtered Hessian block is not positive definite");
-}
-
-template <class Preconditioner>
-Eigen::MatrixXd EmuSolver::preconditioner_solve(Preconditioner& pc, const LoadCase& load, const Eigen::MatrixXd& Frows,
-                                                const Eigen::MatrixXd& Rrows, const char* not_spd) {
-  const Context c = make_context(load);
-  std::vector<Mat9> A;
-  blocks_into(c, to_cols(Frows), &A, nullptr);
-  if (!pc.update(A)) throw std::runtime_error(not_spd);
-  Mat9X out;
-  pc.apply(to_cols(Rrows), out);
-  return out.transpose();
-}
-
-Eigen::MatrixXd EmuSolver::block_hessians(const LoadCase& load, const Eigen::MatrixXd& Frows, bool exact) const {
-  const Context c = make_context(load);
-  std::vector<Mat9> A_filtered, A_exact;
-  blocks_into(c, to_cols(Frows), &A_filtered, &A_exact);
-  const std::vector<Mat9>& A = exact ? A_exact : A_filtered;
-  Eigen::MatrixXd out(A.size(), 81);
-  for (size_t t = 0; t < A.size(); ++t) out.row(t) = Eigen::Map<const Eigen::Matrix<double, 1, 81>>(A[t].data());
-  return out;
 }
 
 double EmuSolver::load_work(const Context& c, const Eigen::MatrixX3d& x) const {

@@ -17,8 +17,9 @@
 // on SO(3) are in bone_rotations.h. The gradient norm reported and tested is the Riemannian one (bone blocks
 // projected to the tangent space): the normal part is the rigidity reaction.
 //
-// Unknowns: one per soft tet (tet order), then one per bone; the diagnostic
-// functions take and return #unknowns by 9 arrays (= #T by 9 without bones).
+// Unknowns: one per soft tet (tet order), then one per bone. The pieces one
+// at a time (energy, gradient, Hessian products, preconditioner solves) are
+// in emu_solver_testing.h, for tests and benchmarks.
 #include <array>
 #include <memory>
 
@@ -50,43 +51,6 @@ class EmuSolver {
     options_.on_iteration = std::move(f);
   }
 
-  // The pieces, for tests and diagnostics. F, V, R: #unknowns by 9.
-  // gradient / hessian_product are Euclidean (no tangent projection).
-  double energy(const LoadCase& load, const Eigen::MatrixXd& F) const;
-  Eigen::MatrixXd gradient(const LoadCase& load, const Eigen::MatrixXd& F) const;
-  Eigen::MatrixX3d fit_positions(const LoadCase& load, const Eigen::MatrixXd& F) const;
-  /// Exact Hessian times V: material blocks PSD-filtered, or unfiltered with exact = true
-  /// (with contact, plus J^T H_c J V: the contact Hessian as the term gives it).
-  Eigen::MatrixXd hessian_product(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& V,
-                                  bool exact = false) const;
-  /// H_k^-1 R with the solver's k modes.
-  Eigen::MatrixXd woodbury_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R) const;
-  /// H^-1 R through the Schur-complement preconditioner (the exact inverse of the
-  /// filtered Hessian); only for a solver built with preconditioner = Schur.
-  /// Refactorises the preconditioner at F (each solve rebuilds it at its start).
-  Eigen::MatrixXd schur_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R);
-  /// M^-1 R through the constant Schur complement S0 (constant_schur.h); only for
-  /// a solver built with preconditioner = ConstantSchur. Blocks A_u at F.
-  Eigen::MatrixXd constant_schur_solve(const LoadCase& load, const Eigen::MatrixXd& F, const Eigen::MatrixXd& R);
-  /// The bone coarse space's turn of movable bone `bone` by the tangent M
-  /// (3x3, W R for a turn W of the bone's rotation R) with the soft tissue
-  /// following (bone_coarse_space.h): Z (#unknowns by 9: M on the bone, the
-  /// soft F_t of the fitted positions, other bones 0) and the Euclidean H Z at
-  /// F (filtered blocks unless exact; no contact term), both from the bone's
-  /// unit-turn fits (no fit per turn), as the coarse space builds them.
-  std::pair<Eigen::MatrixXd, Eigen::MatrixXd> bone_turn(const LoadCase& load, const Eigen::MatrixXd& F, int bone,
-                                                        const Eigen::Matrix3d& M, bool exact = false) const;
-  /// The same for three tangents at once, as the coarse space's rebuild forms
-  /// them (one pass over the blocks); the same bits as three bone_turn calls.
-  std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, 3> bone_turns(const LoadCase& load, const Eigen::MatrixXd& F,
-                                                                         int bone,
-                                                                         const std::array<Eigen::Matrix3d, 3>& M,
-                                                                         bool exact = false) const;
-  /// Blocks A_u, #unknowns by 81 (column-major 9x9 per row); filtered unless exact.
-  Eigen::MatrixXd block_hessians(const LoadCase& load, const Eigen::MatrixXd& F, bool exact = false) const;
-  Eigen::MatrixXd mode_matrix() const { return woodbury_->dense_B(); }
-  Eigen::VectorXd mode_values() const { return woodbury_->lambda(); }
-
   int modes() const { return woodbury_->k(); }
   double alpha() const { return emu_.alpha; }
   /// A new (absolute) alpha for the following solves: nothing is refactorised
@@ -109,13 +73,17 @@ class EmuSolver {
   const Eigen::VectorXi& tet_unknown() const { return layout_.tet_unknown; }
 
  private:
-  /// The diagnostics above: preconditioner pc rebuilt from the filtered blocks at F, applied to R.
-  template <class Preconditioner>
-  Eigen::MatrixXd preconditioner_solve(Preconditioner& pc, const LoadCase& load, const Eigen::MatrixXd& F,
-                                       const Eigen::MatrixXd& R, const char* not_spd);
-  struct Context;  // per-load data: activations, pinned share of F, joint targets, gravity terms
+  struct Context {  // per-load data: activations, pinned share of F, joint targets, gravity terms
+    Eigen::VectorXd act;         // #T activation
+    Eigen::MatrixX3d x_pinned;   // #V by 3: pinned rows at targets, other rows zero
+    Mat9X F_pinned;              // F_t(x_pinned)
+    Eigen::MatrixX3d h;          // joint targets
+    Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
+    bool has_gravity = false;
+    Mat9X F_gravity;             // F_t(L^-1 f): the load's share of the gradient
+  };
   class Newton;    // one solve's state, as the Newton driver sees it (emu_solver.cpp)
-  friend struct EmuSolverProbe;  // bench/micro/bench_cg.cpp: times the kernels of a CG iteration
+  friend struct EmuSolverTesting;  // the pieces one at a time, for tests and benchmarks (emu_solver_testing.h)
   Context make_context(const LoadCase& load) const;
   /// The round-off level of the gradient norm (see Convergence).
   double gradient_floor(const Context& c) const;
@@ -137,14 +105,6 @@ class EmuSolver {
   void hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) const;
   /// The same with v's fit given: Fd (9 x #T) = F_t(x*(v)).
   void hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, const Mat9X& Fd, Mat9X& out) const;
-  /// N turns of bone b by M[k] with the soft tissue following (see bone_turn),
-  /// from turn_fits_: Z[k] (9 x #unknowns) and the Euclidean H Z[k] = A Z[k] -
-  /// alpha C^T K^-1 C Z[k] without a back-substitution, one pass over the
-  /// blocks A for all N (the coarse space's rebuild, N = 3).
-  template <int N>
-  std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, N> turns_at(const LoadCase& load, const Eigen::MatrixXd& F,
-                                                                      int bone, const std::array<Mat3, N>& M,
-                                                                      bool exact) const;
   template <int N>
   void bone_turns_into(const std::vector<Mat9>& A, int b, const std::array<Mat3, N>& M, std::array<Mat9X, N>& Z,
                        std::array<Mat9X, N>& HZ) const;
