@@ -467,9 +467,14 @@ def test_schur_preconditioner_is_the_exact_inverse_of_the_filtered_hessian(eps):
     x = testing.schur_solve(core, load, F, Rhs)
     xn = np.linalg.solve(H, Rhs.ravel()).reshape(-1, 9)
     np.testing.assert_allclose(x, xn, rtol=0, atol=1e-7 * np.abs(xn).max())
-    # a Woodbury solver has no Schur preconditioner: a clear error
+    # a solver holds only the preconditioner it uses: asking for another is a clear error
     with pytest.raises(ValueError, match="preconditioner='schur'"):
         testing.schur_solve(emu.Solver(s, "emu", alpha=100.0)._core, load, F, Rhs)
+    with pytest.raises(ValueError, match="preconditioner='woodbury'"):
+        testing.woodbury_solve(core, load, F, Rhs)
+    with pytest.raises(ValueError, match="preconditioner='woodbury'"):
+        testing.mode_values(core)
+    assert core.modes == 0
     # the residual test alone (cg_model_decrease=0): the truncation test never
     # holds at the first iteration (k (q_0 - q_1) = |q_1|), so it would add a
     # second, empty one to every step

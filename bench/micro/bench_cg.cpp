@@ -45,7 +45,9 @@ struct CgKernels {
     A.resize(n);
     for (long u = 0; u < n; ++u)
       for (int i = 0; i < 81; ++i) A[u].data()[i] = blocks(u, i);  // a row: the column-major 9x9 block
-    if (!EmuSolverTesting::woodbury(*solver).update(A)) throw std::runtime_error("bench_cg: the Woodbury matrix X is not definite");
+    Woodbury& woodbury = EmuSolverTesting::woodbury(*solver);
+    woodbury.update(A);
+    if (!woodbury.low_rank_term()) throw std::runtime_error("bench_cg: the Woodbury matrix X is not definite");
     if (!constant_schur->update(A) || !constant_schur_double->update(A))
       throw std::runtime_error("bench_cg: a block is not definite");
     v = Mat9X::Zero(9, n);

@@ -6,7 +6,6 @@
 #include "bind.h"
 #include "emu/model/model.h"
 #include "emu/solvers/emu_solver.h"
-#include "emu/solvers/emu_solver_testing.h"
 #include "emu/solvers/fem_solver.h"
 #include "emu/solvers/option_choices.h"
 
@@ -111,9 +110,10 @@ Eigen::MatrixXd history_array(const SolveResult& r) {
   }
   return h;
 }
-}  // namespace
 
-void bind_solvers(py::module_& m) {
+using gil = py::call_guard<py::gil_scoped_release>;
+
+void bind_options(py::module_& m) {
   py::class_<SolverOptions>(m, "SolverOptions")
       .def(py::init<>())
       .def_readwrite("max_iterations", &SolverOptions::max_iterations)
@@ -175,7 +175,9 @@ void bind_solvers(py::module_& m) {
       .def_readwrite("recycled_directions", &EmuOptions::recycled_directions)
       .def_readwrite("single_precision_preconditioner", &EmuOptions::single_precision_preconditioner)
       .def_readwrite("lbfgs_memory", &EmuOptions::lbfgs_memory);
+}
 
+void bind_results(py::module_& m) {
   py::class_<PhaseTimes>(m, "PhaseTimes")
       .def_readonly("hessian", &PhaseTimes::hessian)
       .def_readonly("preconditioner", &PhaseTimes::preconditioner)
@@ -204,8 +206,9 @@ void bind_solvers(py::module_& m) {
       .def_readonly("neutral_axes", &SolveResult::neutral_axes)
       .def_property_readonly("history", &history_array,
                              "#iterations+1 by 7: iteration, energy, grad_norm, step, time_s, cg_iterations, backtracks");
+}
 
-  using gil = py::call_guard<py::gil_scoped_release>;
+void bind_fem_solver(py::module_& m) {
   py::class_<FemSolver>(m, "FemSolver")
       .def(py::init([](const Model& m, const SolverOptions& o) {
              py::gil_scoped_release release;
@@ -227,8 +230,6 @@ void bind_solvers(py::module_& m) {
           },
           py::arg("load"), py::arg("x0"), py::arg("on_iteration") = py::none())
       .def("structures", &FemSolver::structures, "(name, bytes) of the structures this solver built")
-      .def("energy", &FemSolver::energy, py::arg("load"), py::arg("x"), gil())
-      .def("gradient", &FemSolver::gradient, py::arg("load"), py::arg("x"), gil())
       .def(
           "newton_correction",
           [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0, const std::string& hessian, int max_steps) {
@@ -244,26 +245,13 @@ void bind_solvers(py::module_& m) {
           },
           py::arg("load"), py::arg("x0"), py::arg("hessian") = "lower-energy", py::arg("max_steps") = 1,
           "Positions after the Newton correction steps of the FEM energy from x0")
-      .def("reduced_energy", &FemSolver::reduced_energy, py::arg("load"), py::arg("x0"), py::arg("z"), gil(),
-           "Energy at increment z of the reduced unknowns (free soft displacements, bone increments) about x0")
-      .def(
-          "reduced_system",
-          [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0, bool exact) {
-            Eigen::VectorXd g;
-            Eigen::MatrixXd H;
-            {
-              py::gil_scoped_release release;
-              s.reduced_system(l, x0, exact, g, H);
-            }
-            return py::make_tuple(g, H);
-          },
-          py::arg("load"), py::arg("x0"), py::arg("exact") = true,
-          "(gradient, dense Hessian) of the reduced unknowns at x0 (small meshes only)")
       .def_property_readonly("setup_seconds", &FemSolver::setup_seconds)
       .def_property_readonly("factor_nnz", &FemSolver::factor_nnz)
       .def_property_readonly("factorizations", &FemSolver::factorizations,
                              "numeric factorisations of the Newton matrix so far (solves and corrections)");
+}
 
+void bind_emu_solver(py::module_& m) {
   py::class_<EmuSolver>(m, "EmuSolver")
       .def(py::init([](const Model& m, const SolverOptions& o, const EmuOptions& e) {
              py::gil_scoped_release release;
@@ -295,27 +283,13 @@ void bind_solvers(py::module_& m) {
       .def_property_readonly("modes_seconds", &EmuSolver::modes_seconds)
       .def_property_readonly("setup_seconds", &EmuSolver::setup_seconds)
       .def_property_readonly("factor_nnz", &EmuSolver::factor_nnz);
+}
+}  // namespace
 
-  // EmuSolver's pieces one at a time (emu_solver_testing.h): tests and diagnostics only.
-  py::module_ t = m.def_submodule("testing", "EmuSolver's pieces one at a time, for tests and diagnostics");
-  t.def("energy", &EmuSolverTesting::energy, py::arg("solver"), py::arg("load"), py::arg("F"), gil());
-  t.def("gradient", &EmuSolverTesting::gradient, py::arg("solver"), py::arg("load"), py::arg("F"), gil(),
-        "the Euclidean gradient, #unknowns by 9");
-  t.def("fit_positions", &EmuSolverTesting::fit_positions, py::arg("solver"), py::arg("load"), py::arg("F"), gil());
-  t.def("hessian_product", &EmuSolverTesting::hessian_product, py::arg("solver"), py::arg("load"), py::arg("F"),
-        py::arg("V"), py::arg("exact") = false, gil());
-  t.def("block_hessians", &EmuSolverTesting::block_hessians, py::arg("solver"), py::arg("load"), py::arg("F"),
-        py::arg("exact") = false, gil());
-  t.def("woodbury_solve", &EmuSolverTesting::woodbury_solve, py::arg("solver"), py::arg("load"), py::arg("F"),
-        py::arg("R"), gil());
-  t.def("schur_solve", &EmuSolverTesting::schur_solve, py::arg("solver"), py::arg("load"), py::arg("F"),
-        py::arg("R"), gil());
-  t.def("constant_schur_solve", &EmuSolverTesting::constant_schur_solve, py::arg("solver"), py::arg("load"),
-        py::arg("F"), py::arg("R"), gil());
-  t.def("bone_turn", &EmuSolverTesting::bone_turn, py::arg("solver"), py::arg("load"), py::arg("F"), py::arg("bone"),
-        py::arg("M"), py::arg("exact") = false, gil(),
-        "(Z, H Z): the bone coarse space's turn of a movable bone by the tangent M, from its unit-turn fits");
-  t.def("mode_matrix", &EmuSolverTesting::mode_matrix, py::arg("solver"));
-  t.def("mode_values", &EmuSolverTesting::mode_values, py::arg("solver"));
+void bind_solvers(py::module_& m) {
+  bind_options(m);
+  bind_results(m);
+  bind_fem_solver(m);
+  bind_emu_solver(m);
 }
 }  // namespace emu::bindings

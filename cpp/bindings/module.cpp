@@ -9,4 +9,5 @@ PYBIND11_MODULE(_core, m) {
   emu::bindings::bind_mesh(m);
   emu::bindings::bind_model(m);
   emu::bindings::bind_solvers(m);
+  emu::bindings::bind_testing(m);
 }

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import emu
+from emu._core import testing
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 from stability import (CASES, arm, bar, every_other_flipped, inverted_bar, pinned_bar,  # noqa: E402
@@ -134,12 +135,12 @@ def test_fem_leaves_a_saddle_along_negative_curvature():
     assert fast.converged and fast.iterations < 100 and fast.negative_curvature_steps >= 1
     solver = emu.Solver(s, "fem")
     load = solver.load_case(act)
-    _, H = solver._core.reduced_system(load, fast.positions, True)
+    _, H = testing.reduced_system(solver._core, load, fast.positions, True)
     assert np.linalg.eigvalsh(H)[0] > 0                      # a minimum, not a saddle
     # the saddle: where the slow run sat at iteration 100, |g| / |g0| ~ 1e-6
     # (whether it later converges there or starts to leave is round-off)
     saddle = np.asarray(slow.history["energy"])[100]
     assert fast.energy < saddle - 1e-3 * abs(saddle)
-    _, Hs = solver._core.reduced_system(load, emu.Solver(s, "fem", max_iterations=100, negative_curvature=False)
+    _, Hs = testing.reduced_system(solver._core, load, emu.Solver(s, "fem", max_iterations=100, negative_curvature=False)
                                         .solve(act).positions, True)
     assert np.linalg.eigvalsh(Hs)[0] < 0                     # ... and it is one

@@ -32,11 +32,12 @@
 
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
+#include "emu/solvers/block_preconditioner.h"
 #include "emu/solvers/schur_form.h"
 
 namespace emu {
 
-class ConstantSchur {
+class ConstantSchur final : public BlockPreconditioner {
  public:
   /// single_precision (EmuOptions::single_precision_preconditioner): S0's
   /// solves with its factor rounded to float (S0's own factor, or, where
@@ -47,13 +48,17 @@ class ConstantSchur {
 
   /// Invert the SPD blocks A_u (one per unknown). False if one is not SPD
   /// (apply() then returns r unchanged).
-  bool update(const std::vector<Mat9>& A);
+  bool update(const std::vector<Mat9>& A) override;
+  const char* failure() const override { return "a filtered Hessian block is not positive definite (or not finite)"; }
 
   /// out = M^-1 r; r, out are 9 x #unknowns.
-  void apply(const Mat9X& r, Mat9X& out) const;
+  void apply(const Mat9X& r, Mat9X& out) const override;
 
   /// A new alpha: S0's weights change, so it is factorised again (numerically).
-  void set_alpha(double alpha);
+  void set_alpha(double alpha) override;
+  void add_structures(std::vector<std::pair<std::string, double>>& out) const override {
+    out.emplace_back("constant Schur preconditioner", bytes());
+  }
 
   /// Per-tet weights e_t of S0 (#T).
   static Eigen::VectorXd weights(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd& wv,

@@ -14,16 +14,18 @@
 #include "emu/linalg/rotation.h"
 #include "emu/solvers/bone_coarse_space.h"
 #include "emu/solvers/bone_rotations.h"
+#include "emu/solvers/constant_schur.h"
 #include "emu/solvers/newton/newton_driver.h"
 #include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
 #include "emu/solvers/newton/rounding_perturbation.h"
+#include "emu/solvers/schur_preconditioner.h"
+#include "emu/solvers/woodbury.h"
 
 namespace emu {
 namespace {
 double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
 }  // namespace
-
 
 EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options)
     : model_((model.validate(), model)), layout_(model_), options_(options), emu_(emu_options) {
@@ -38,52 +40,11 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   auto t0 = Clock::now();
   acap_ = std::make_unique<AcapOperator>(model_, layout_);
   factor_seconds_ = seconds_since(t0);
-  t0 = Clock::now();
-  // Modes only where the Woodbury approximation is used (section 7: leave out
-  // what the solve does not need).
-  const bool krylov = emu_.step == EmuStep::NewtonKrylov;
-  const bool schur = krylov && emu_.preconditioner == EmuPreconditioner::Schur;
-  const bool constant_schur = krylov && emu_.preconditioner == EmuPreconditioner::ConstantSchur;
-  const int ks = schur || constant_schur ? 0 : (emu_.modes + 2) / 3;
-  const Modes modes =
-      acap_->has_bones()
-          ? lowest_modes_of_inverse(acap_->dofs(),
-                                    [&](const double* in, double* out) {
-                                      Eigen::MatrixXd R = Eigen::Map<const Eigen::VectorXd>(in, acap_->dofs());
-                                      Eigen::MatrixXd Z;
-                                      acap_->solve(R, Z);
-                                      Eigen::Map<Eigen::VectorXd>(out, acap_->dofs()) = Z.col(0);
-                                    },
-                                    ks, acap_->constraint_rank())
-          : lowest_modes(acap_->factor(), std::min(ks, layout_.num_free));
-  modes_seconds_ = seconds_since(t0);
-  woodbury_ = std::make_unique<Woodbury>(model_, layout_, *acap_, modes, emu_.alpha);
-  if (schur) {
-    t0 = Clock::now();
-    schur_ = std::make_unique<SchurPreconditioner>(model_, layout_, *acap_, emu_.alpha);
-    factor_seconds_ += seconds_since(t0);
-  }
-  if (constant_schur) {
-    t0 = Clock::now();
-    constant_schur_ = std::make_unique<ConstantSchur>(model_, layout_, *acap_, emu_.alpha, emu_.single_precision_preconditioner);
-    factor_seconds_ += seconds_since(t0);
-  }
+  build_preconditioner();
   tet_energy_.resize(model_.tets.rows());
   if (layout_.num_bones && emu_.bone_coarse_space) {  // setup: counted with the factorisations
     t0 = Clock::now();
-    turn_fits_.resize(layout_.num_bones);
-    Eigen::MatrixX3d dx;
-    Mat9X Fd;
-    for (int b = 0; b < layout_.num_bones; ++b) {
-      UnitTurnFits& f = turn_fits_[b];
-      Mat9X Z = Mat9X::Zero(9, layout_.num_unknowns);
-      Z.col(layout_.num_soft + b) = flatten(Mat3::Identity());
-      fit_linear_into(Z, dx, Fd);
-      f.follow.resize(9, layout_.num_soft);
-      for (int u = 0; u < layout_.num_soft; ++u) f.follow.col(u) = Fd.col(layout_.unknown_tets[u]);
-      Z.leftCols(layout_.num_soft) = f.follow;
-      fit_linear_into(Z, dx, f.fit);
-    }
+    build_unit_turn_fits();
     factor_seconds_ += seconds_since(t0);
   }
   {  // the gradient's round-off at an exact equilibrium (see rest_gradient_per_alpha_)
@@ -93,13 +54,57 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   }
 }
 
+void EmuSolver::build_preconditioner() {
+  const bool krylov = emu_.step == EmuStep::NewtonKrylov;
+  const EmuPreconditioner kind = krylov ? emu_.preconditioner : EmuPreconditioner::Woodbury;
+  const auto t0 = Clock::now();
+  if (kind == EmuPreconditioner::Schur) {
+    preconditioner_ = std::make_unique<SchurPreconditioner>(model_, layout_, *acap_, emu_.alpha);
+    factor_seconds_ += seconds_since(t0);
+  } else if (kind == EmuPreconditioner::ConstantSchur) {
+    preconditioner_ =
+        std::make_unique<ConstantSchur>(model_, layout_, *acap_, emu_.alpha, emu_.single_precision_preconditioner);
+    factor_seconds_ += seconds_since(t0);
+  } else {  // modes only where the Woodbury approximation uses them (leave out what the solve does not need)
+    const Modes modes = acap_modes((emu_.modes + 2) / 3);
+    modes_seconds_ = seconds_since(t0);
+    auto woodbury = std::make_unique<Woodbury>(model_, layout_, *acap_, modes, emu_.alpha);
+    modes_ = woodbury->k();
+    preconditioner_ = std::move(woodbury);
+  }
+}
+
+Modes EmuSolver::acap_modes(int ks) const {
+  if (!acap_->has_bones()) return lowest_modes(acap_->factor(), std::min(ks, layout_.num_free));
+  const auto solve = [&](const double* in, double* out) {
+    Eigen::MatrixXd R = Eigen::Map<const Eigen::VectorXd>(in, acap_->dofs());
+    Eigen::MatrixXd Z;
+    acap_->solve(R, Z);
+    Eigen::Map<Eigen::VectorXd>(out, acap_->dofs()) = Z.col(0);
+  };
+  return lowest_modes_of_inverse(acap_->dofs(), solve, ks, acap_->constraint_rank());
+}
+
+void EmuSolver::build_unit_turn_fits() {
+  turn_fits_.resize(layout_.num_bones);
+  Eigen::MatrixX3d dx;
+  Mat9X Fd;
+  for (int b = 0; b < layout_.num_bones; ++b) {
+    UnitTurnFits& f = turn_fits_[b];
+    Mat9X Z = Mat9X::Zero(9, layout_.num_unknowns);
+    Z.col(layout_.num_soft + b) = flatten(Mat3::Identity());
+    fit_linear_into(Z, dx, Fd);
+    f.follow.resize(9, layout_.num_soft);
+    for (int u = 0; u < layout_.num_soft; ++u) f.follow.col(u) = Fd.col(layout_.unknown_tets[u]);
+    Z.leftCols(layout_.num_soft) = f.follow;
+    fit_linear_into(Z, dx, f.fit);
+  }
+}
+
 std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
   std::vector<std::pair<std::string, double>> out;
   out.emplace_back("ACAP factor", 8.0 * acap_->factor().factor_nnz());
-  if (woodbury_->k() > 0) out.emplace_back("ACAP modes", woodbury_->mode_bytes());
-  if (!schur_ && !constant_schur_) out.emplace_back("Woodbury block inverses", woodbury_->block_bytes());
-  if (schur_) out.emplace_back("Schur preconditioner", schur_->bytes());
-  if (constant_schur_) out.emplace_back("constant Schur preconditioner", constant_schur_->bytes());
+  preconditioner_->add_structures(out);
   if (layout_.num_bones && emu_.bone_coarse_space) {
     // H Z (3 turns per bone and the recycled directions, at most) and the
     // recycled directions' columns of Z over all unknowns, rebuilt every
@@ -116,9 +121,7 @@ std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
 void EmuSolver::set_alpha(double alpha) {
   if (!(alpha > 0) || !std::isfinite(alpha)) throw std::invalid_argument("alpha must be positive and finite");
   emu_.alpha = alpha;
-  woodbury_->set_alpha(alpha);
-  if (schur_) schur_->set_alpha(alpha);
-  if (constant_schur_) constant_schur_->set_alpha(alpha);
+  preconditioner_->set_alpha(alpha);
 }
 
 void EmuSolver::set_cg_forcing_max(double eta_max) {
@@ -451,9 +454,7 @@ Mat9X EmuSolver::start_unknowns(const Eigen::MatrixXd* F0) const {
 }
 
 void EmuSolver::base_precondition(const Mat9X& F, const Mat9X& in, Mat9X& out) const {
-  if (schur_) schur_->apply(in, out);
-  else if (constant_schur_) constant_schur_->apply(in, out);
-  else woodbury_->apply(in, out);
+  preconditioner_->apply(in, out);
   if (layout_.num_bones) project_tangent(F, out);
 }
 
@@ -476,123 +477,36 @@ class EmuSolver::Newton {
   const Eigen::MatrixX3d& positions() const { return x_; }
   const std::vector<NeutralMode>& neutral_modes() const { return coarse_.neutral_modes(); }
 
+  // A step's direction: refresh the blocks (and the preconditioner when due),
+  // the contact Hessian, the bone coarse space, then the step's kind
+  // (Woodbury, L-BFGS, or a Krylov solve), a descent check, and a cap where
+  // contact's collision detection allows less than the full step.
   SearchDirection direction(int it, PhaseTimes& time) {
     SearchDirection dir;
-    const EmuOptions& o = s_.emu_;
     const bool exact = exact_allowed_ && exact_ok_;
     if (exact_allowed_ && !exact) ++dir.filtered;
-    // The Woodbury (or Schur) preconditioner lags behind exact Hessian
-    // products: it is rebuilt (eigen-filtered blocks, SYRK) every
-    // preconditioner_refresh steps, or sooner when CG slows down by half since
-    // the last rebuild. The paper's Woodbury step rebuilds it every step;
-    // L-BFGS's curvature pairs make up for the lag between rebuilds.
-    const bool lbfgs = o.step == EmuStep::Lbfgs;
-    const bool refresh = (!exact && !lbfgs) || it == 1 || since_refresh_ >= o.preconditioner_refresh ||
-                         (cg_after_refresh_ >= 0 && last_cg_ > 1.5 * cg_after_refresh_ + 5);
-    if (refresh) {
-      {
-        ScopedSeconds timer(time.hessian);
-        s_.blocks_into(c_, F_, &A_, exact ? &A_exact_ : nullptr);
-      }
-      ScopedSeconds timer(time.preconditioner);
-      if (s_.schur_) {
-        ++dir.factorizations;
-        if (!s_.schur_->update(A_)) return dir.fail("Schur-complement preconditioner could not be factorised");
-      } else if (s_.constant_schur_) {
-        if (!s_.constant_schur_->update(A_))
-          return dir.fail("a filtered Hessian block is not positive definite (or not finite)");
-      } else {
-        s_.woodbury_->update(A_);
-      }
-      since_refresh_ = 0;
-      cg_after_refresh_ = -1;
-    } else if (!lbfgs) {
-      ScopedSeconds timer(time.hessian);
-      s_.blocks_into(c_, F_, nullptr, &A_exact_);
-    }
+    bool refreshed = false;
+    if (!refresh_blocks(it, exact, dir, time, refreshed)) return dir;
     const std::vector<Mat9>& H = exact ? A_exact_ : A_;
     if (s_.has_contact()) {
       ScopedSeconds timer(time.hessian);
       Hc_ = s_.options_.contact.checked_hessian(x_);
     }
-    // Contact's curvature J^T H_c J enters the products (the preconditioner
-    // leaves it out); with bones its bone columns are projected like the rest.
-    auto product = [&](const Mat9X& v, Mat9X& out) {
-      if (bones_) s_.riemannian_product(H, F_, g_, v, exact, out);
-      else s_.hessian_product_into(H, v, out);
-      if (s_.has_contact() && Hc_.nonZeros()) {
-        Mat9X add = Mat9X::Zero(9, out.cols());
-        s_.add_position_hessian_product(Hc_, v, add);
-        if (bones_) s_.project_tangent(F_, add);
-        out += add;
-      }
-    };
-    // The bone coarse space follows the Hessian CG uses (rebuilt every step;
-    // for L-BFGS, whose H0 it is part of, with the Woodbury term).
+    const auto product = [&](const Mat9X& v, Mat9X& out) { hessian_product(H, exact, v, out); };
     for (Mat9X& r : recycled_) s_.project_tangent(F_, r);  // tangent at the current bones
-    if (bones_ && o.bone_coarse_space && (!lbfgs || refresh)) {
+    // The bone coarse space follows the Hessian CG uses (rebuilt every step;
+    // for L-BFGS, whose H0 it is part of, with the preconditioner).
+    if (bones_ && s_.emu_.bone_coarse_space && (s_.emu_.step != EmuStep::Lbfgs || refreshed)) {
       ScopedSeconds timer(time.preconditioner);
-      coarse_.build(
-          F_,
-          [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
-            s_.bone_turns_into<3>(H, b, M, Z, HZ);  // the three turns in one pass over H's blocks
-            for (int k = 0; k < 3; ++k) {
-              if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
-              else bone_rotations::riemannian_columns(F_, g_, Z[k], exact, s_.layout_.num_soft, s_.model_.bone_stiffness, HZ[k]);
-            }
-          },
-          product, recycled_);
+      build_coarse_space(H, exact, product);
     }
     ++since_refresh_;
-    ScopedSeconds timer(time.linear_solve);  // CG and the direction's fit
-    if (o.step == EmuStep::Woodbury) {
-      precondition(gR_, d_);
-      d_ = -d_;
-    } else if (lbfgs) {
-      lbfgs_.apply(gR_, [&](const Mat9X& r, Mat9X& z) { precondition(r, z); }, d_);
-      d_ = -d_;
-    } else {
-      // Inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker)
-      // and until the quadratic model stops falling fast (Nash-Sofer).
-      const double eta =
-          std::min(o.cg_forcing_max, std::max(o.cg_forcing_min, std::pow(gn_ / g0_, o.cg_forcing_exponent)));
-      const PcgResult cg = pcg_.solve(product, [&](const Mat9X& r, Mat9X& z) { precondition(r, z); },
-                                      Mat9X(-gR_), eta * gn_, o.cg_max_iterations, d_, o.cg_model_decrease);
-      dir.cg_iterations = cg.iterations;
-      if (cg.negative_curvature) ++dir.filtered;  // exact H is indefinite here: keep what CG had
+    {
+      ScopedSeconds timer(time.linear_solve);  // the step and the direction's fit
+      if (!step_direction(product, dir)) return dir;
+      prepare_line(dir);
     }
-    if (o.recycled_directions > 0 && bones_ && o.bone_coarse_space && dir.cg_iterations > std::max(50, 4 * last_cg_))
-      recycle(d_);  // only where a coarse space takes them
-    dir.slope = dot(gR_, d_);
-    if (!(dir.slope < 0)) {
-      precondition(gR_, d_);
-      d_ = -d_;
-      dir.slope = dot(gR_, d_);
-      if (!(dir.slope < 0)) return dir.fail("no descent direction (Hessian approximation broke down)");
-    }
-    // Without bones x*(F + s d) = x + s dx: one fit per direction. A bone's
-    // path R + s d is retracted to rotations, so each trial refits.
-    if (!bones_) {
-      s_.fit_linear_into(d_, dx_, Fd_);
-      Wx_ = s_.load_work(c_, x_);
-      Wdx_ = s_.load_work(c_, dx_);
-    }
-    if (s_.has_contact()) {
-      ScopedSeconds timer(time.line_search);
-      const double smax = collision_free_step();
-      if (!(smax > 0))
-        return dir.fail("contact: continuous collision detection allows no step along the Newton direction "
-                        "(surfaces touching; a larger contact distance may help)");
-      if (smax < 1) {
-        d_ *= smax;
-        dir.slope *= smax;
-        if (!bones_) {
-          dx_ *= smax;
-          Fd_ *= smax;
-          Wdx_ *= smax;
-        }
-      }
-    }
+    if (s_.has_contact() && !cap_at_contact(dir, time)) return dir;
     exact_step_ = exact;
     dir_cg_ = dir.cg_iterations;
     return dir;
@@ -674,6 +588,140 @@ class EmuSolver::Newton {
   }
 
  private:
+  // The blocks A_u at F_: the filtered ones (and the preconditioner built on
+  // them) every preconditioner_refresh steps, or sooner when CG slows down by
+  // half since the last rebuild, the exact ones every step they are used.
+  // Between rebuilds the preconditioner lags behind the exact products
+  // (L-BFGS's curvature pairs make up for it); the Woodbury step rebuilds it
+  // every step, as the paper does. False: dir has failed.
+  bool refresh_blocks(int it, bool exact, SearchDirection& dir, PhaseTimes& time, bool& refreshed) {
+    const EmuOptions& o = s_.emu_;
+    const bool lbfgs = o.step == EmuStep::Lbfgs;
+    refreshed = (!exact && !lbfgs) || it == 1 || since_refresh_ >= o.preconditioner_refresh ||
+                (cg_after_refresh_ >= 0 && last_cg_ > 1.5 * cg_after_refresh_ + 5);
+    if (!refreshed) {
+      if (!lbfgs) {
+        ScopedSeconds timer(time.hessian);
+        s_.blocks_into(c_, F_, nullptr, &A_exact_);
+      }
+      return true;
+    }
+    {
+      ScopedSeconds timer(time.hessian);
+      s_.blocks_into(c_, F_, &A_, exact ? &A_exact_ : nullptr);
+    }
+    ScopedSeconds timer(time.preconditioner);
+    BlockPreconditioner& pc = *s_.preconditioner_;
+    if (pc.factorises_on_update()) ++dir.factorizations;
+    if (!pc.update(A_)) {
+      dir.fail(pc.failure());
+      return false;
+    }
+    since_refresh_ = 0;
+    cg_after_refresh_ = -1;
+    return true;
+  }
+
+  // out = H v with H's blocks (exact or filtered), Riemannian with bones (the
+  // spring's curvature with exact blocks); contact's curvature J^T H_c J
+  // enters the products (the preconditioner leaves it out), its bone columns
+  // projected like the rest.
+  void hessian_product(const std::vector<Mat9>& H, bool exact, const Mat9X& v, Mat9X& out) const {
+    if (bones_) s_.riemannian_product(H, F_, g_, v, exact, out);
+    else s_.hessian_product_into(H, v, out);
+    if (s_.has_contact() && Hc_.nonZeros()) {
+      Mat9X add = Mat9X::Zero(9, out.cols());
+      s_.add_position_hessian_product(Hc_, v, add);
+      if (bones_) s_.project_tangent(F_, add);
+      out += add;
+    }
+  }
+
+  template <class Product>
+  void build_coarse_space(const std::vector<Mat9>& H, bool exact, const Product& product) {
+    coarse_.build(
+        F_,
+        [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
+          s_.bone_turns_into<3>(H, b, M, Z, HZ);  // the three turns in one pass over H's blocks
+          for (int k = 0; k < 3; ++k) {
+            if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
+            else
+              bone_rotations::riemannian_columns(F_, g_, Z[k], exact, s_.layout_.num_soft, s_.model_.bone_stiffness,
+                                                 HZ[k]);
+          }
+        },
+        product, recycled_);
+  }
+
+  // d_ by the step's kind: the preconditioner's step (Woodbury), L-BFGS on it,
+  // or inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker)
+  // and until the quadratic model stops falling fast (Nash-Sofer). A
+  // direction that does not descend is replaced by the preconditioner's.
+  // False: dir has failed.
+  template <class Product>
+  bool step_direction(const Product& product, SearchDirection& dir) {
+    const EmuOptions& o = s_.emu_;
+    const auto precond = [&](const Mat9X& r, Mat9X& z) { precondition(r, z); };
+    if (o.step == EmuStep::Woodbury) {
+      precondition(gR_, d_);
+      d_ = -d_;
+    } else if (o.step == EmuStep::Lbfgs) {
+      lbfgs_.apply(gR_, precond, d_);
+      d_ = -d_;
+    } else {
+      const double eta =
+          std::min(o.cg_forcing_max, std::max(o.cg_forcing_min, std::pow(gn_ / g0_, o.cg_forcing_exponent)));
+      const PcgResult cg =
+          pcg_.solve(product, precond, Mat9X(-gR_), eta * gn_, o.cg_max_iterations, d_, o.cg_model_decrease);
+      dir.cg_iterations = cg.iterations;
+      if (cg.negative_curvature) ++dir.filtered;  // exact H is indefinite here: keep what CG had
+    }
+    if (o.recycled_directions > 0 && bones_ && o.bone_coarse_space && dir.cg_iterations > std::max(50, 4 * last_cg_))
+      recycle(d_);  // only where a coarse space takes them
+    dir.slope = dot(gR_, d_);
+    if (!(dir.slope < 0)) {
+      precondition(gR_, d_);
+      d_ = -d_;
+      dir.slope = dot(gR_, d_);
+      if (!(dir.slope < 0)) {
+        dir.fail("no descent direction (Hessian approximation broke down)");
+        return false;
+      }
+    }
+    return true;
+  }
+
+  // Without bones x*(F + s d) = x + s dx: one fit per direction. A bone's
+  // path R + s d is retracted to rotations, so each trial refits.
+  void prepare_line(const SearchDirection&) {
+    if (bones_) return;
+    s_.fit_linear_into(d_, dx_, Fd_);
+    Wx_ = s_.load_work(c_, x_);
+    Wdx_ = s_.load_work(c_, dx_);
+  }
+
+  // Contact: d_ scaled to the largest collision-free step when that is < 1.
+  // False: dir has failed (no step is free).
+  bool cap_at_contact(SearchDirection& dir, PhaseTimes& time) {
+    ScopedSeconds timer(time.line_search);
+    const double smax = collision_free_step();
+    if (!(smax > 0)) {
+      dir.fail("contact: continuous collision detection allows no step along the Newton direction "
+               "(surfaces touching; a larger contact distance may help)");
+      return false;
+    }
+    if (smax < 1) {
+      d_ *= smax;
+      dir.slope *= smax;
+      if (!bones_) {
+        dx_ *= smax;
+        Fd_ *= smax;
+        Wdx_ *= smax;
+      }
+    }
+    return true;
+  }
+
   // A CG solve far longer than the last one met a mode the preconditioner
   // misses; its direction (orthogonalised against those kept) joins the bone
   // coarse space of the following steps, the oldest dropped beyond

@@ -30,11 +30,9 @@
 #include "emu/linalg/modes.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
-#include "emu/solvers/constant_schur.h"
+#include "emu/solvers/block_preconditioner.h"
 #include "emu/solvers/newton/result.h"
 #include "emu/solvers/solver_options.h"
-#include "emu/solvers/schur_preconditioner.h"
-#include "emu/solvers/woodbury.h"
 
 namespace emu {
 
@@ -51,7 +49,8 @@ class EmuSolver {
     options_.on_iteration = std::move(f);
   }
 
-  int modes() const { return woodbury_->k(); }
+  /// The ACAP modes of the Woodbury preconditioner (0 with another one).
+  int modes() const { return modes_; }
   double alpha() const { return emu_.alpha; }
   /// A new (absolute) alpha for the following solves: nothing is refactorised
   /// (the ACAP matrix and its modes do not depend on alpha).
@@ -84,6 +83,12 @@ class EmuSolver {
   };
   class Newton;    // one solve's state, as the Newton driver sees it (emu_solver.cpp)
   friend struct EmuSolverTesting;  // the pieces one at a time, for tests and benchmarks (emu_solver_testing.h)
+  /// Setup: the preconditioner EmuOptions choose (with the ACAP modes for Woodbury's).
+  void build_preconditioner();
+  /// The ks lowest scalar modes of the ACAP operator K (with movable bones, of K_c^-1 by its solves).
+  Modes acap_modes(int ks) const;
+  /// Setup of the bone coarse space: turn_fits_.
+  void build_unit_turn_fits();
   Context make_context(const LoadCase& load) const;
   /// The round-off level of the gradient norm (see Convergence).
   double gradient_floor(const Context& c) const;
@@ -137,9 +142,8 @@ class EmuSolver {
   SolverOptions options_;
   EmuOptions emu_;
   std::unique_ptr<AcapOperator> acap_;
-  std::unique_ptr<Woodbury> woodbury_;
-  std::unique_ptr<SchurPreconditioner> schur_;  // only with EmuPreconditioner::Schur
-  std::unique_ptr<ConstantSchur> constant_schur_;  // only with EmuPreconditioner::ConstantSchur
+  std::unique_ptr<BlockPreconditioner> preconditioner_;  // EmuOptions::preconditioner's (block_preconditioner.h)
+  int modes_ = 0;
   double factor_seconds_ = 0, modes_seconds_ = 0;
   // |g| at the exact rest equilibrium (F = I, no load) per unit alpha: the
   // round-off of the fit, which the ACAP matrix's conditioning (bone weights

@@ -3,6 +3,9 @@
 #include <stdexcept>
 #include <string>
 
+#include "emu/solvers/constant_schur.h"
+#include "emu/solvers/schur_preconditioner.h"
+
 namespace emu {
 
 double EmuSolverTesting::energy(const EmuSolver& s, const LoadCase& load, const Eigen::MatrixXd& Frows) {
@@ -68,8 +71,9 @@ Eigen::MatrixXd EmuSolverTesting::woodbury_solve(const EmuSolver& s, const LoadC
   const EmuSolver::Context c = s.make_context(load);
   std::vector<Mat9> A;
   s.blocks_into(c, s.to_cols(Frows), &A, nullptr);
-  Woodbury w = *s.woodbury_;
-  if (!w.update(A)) throw std::runtime_error("Woodbury system X is not positive definite");
+  Woodbury w = woodbury_of(s);  // a copy: the solver's own is left as it was
+  w.update(A);
+  if (!w.low_rank_term()) throw std::runtime_error("Woodbury system X is not positive definite");
   Mat9X out;
   w.apply(s.to_cols(Rrows), out);
   return out.transpose();
@@ -90,16 +94,23 @@ Eigen::MatrixXd EmuSolverTesting::preconditioner_solve(EmuSolver& s, Preconditio
 
 Eigen::MatrixXd EmuSolverTesting::schur_solve(EmuSolver& s, const LoadCase& load, const Eigen::MatrixXd& Frows,
                                               const Eigen::MatrixXd& Rrows) {
-  if (!s.schur_) throw std::invalid_argument("this solver has no Schur-complement preconditioner (preconditioner='schur')");
-  return preconditioner_solve(s, *s.schur_, load, Frows, Rrows, "the Schur complement S is not positive definite");
+  auto* pc = dynamic_cast<SchurPreconditioner*>(s.preconditioner_.get());
+  if (!pc) throw std::invalid_argument("this solver has no Schur-complement preconditioner (preconditioner='schur')");
+  return preconditioner_solve(s, *pc, load, Frows, Rrows, "the Schur complement S is not positive definite");
 }
 
 Eigen::MatrixXd EmuSolverTesting::constant_schur_solve(EmuSolver& s, const LoadCase& load,
                                                        const Eigen::MatrixXd& Frows, const Eigen::MatrixXd& Rrows) {
-  if (!s.constant_schur_)
-    throw std::invalid_argument("this solver has no constant Schur preconditioner (preconditioner='constant-schur')");
-  return preconditioner_solve(s, *s.constant_schur_, load, Frows, Rrows,
+  auto* pc = dynamic_cast<ConstantSchur*>(s.preconditioner_.get());
+  if (!pc) throw std::invalid_argument("this solver has no constant Schur preconditioner (preconditioner='constant-schur')");
+  return preconditioner_solve(s, *pc, load, Frows, Rrows,
                               "a filtered Hessian block is not positive definite");
+}
+
+Woodbury& EmuSolverTesting::woodbury_of(const EmuSolver& s) {
+  auto* w = dynamic_cast<Woodbury*>(s.preconditioner_.get());
+  if (!w) throw std::invalid_argument("this solver has no Woodbury preconditioner (preconditioner='woodbury')");
+  return *w;
 }
 
 template <int N>

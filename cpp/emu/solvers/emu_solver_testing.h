@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include "emu/solvers/emu_solver.h"
+#include "emu/solvers/woodbury.h"
 
 namespace emu {
 
@@ -49,14 +50,15 @@ struct EmuSolverTesting {
   static std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, 3> bone_turns(
       const EmuSolver& s, const LoadCase& load, const Eigen::MatrixXd& F, int bone,
       const std::array<Eigen::Matrix3d, 3>& M, bool exact = false);
-  static Eigen::MatrixXd mode_matrix(const EmuSolver& s) { return s.woodbury_->dense_B(); }
-  static Eigen::VectorXd mode_values(const EmuSolver& s) { return s.woodbury_->lambda(); }
+  /// The Woodbury preconditioner's B and Lambda (a solver built with preconditioner = Woodbury).
+  static Eigen::MatrixXd mode_matrix(const EmuSolver& s) { return woodbury_of(s).dense_B(); }
+  static Eigen::VectorXd mode_values(const EmuSolver& s) { return woodbury_of(s).lambda(); }
 
   // The kernels of a CG iteration (bench/micro/bench_cg.cpp).
   static const Model& model(const EmuSolver& s) { return s.model_; }
   static const UnknownLayout& layout(const EmuSolver& s) { return s.layout_; }
   static AcapOperator& acap(EmuSolver& s) { return *s.acap_; }
-  static Woodbury& woodbury(EmuSolver& s) { return *s.woodbury_; }
+  static Woodbury& woodbury(EmuSolver& s) { return woodbury_of(s); }
   static void hessian_product_into(const EmuSolver& s, const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) {
     s.hessian_product_into(A, v, out);
   }
@@ -65,6 +67,7 @@ struct EmuSolverTesting {
   }
 
  private:
+  static Woodbury& woodbury_of(const EmuSolver& s);
   template <class Preconditioner>
   static Eigen::MatrixXd preconditioner_solve(EmuSolver& s, Preconditioner& pc, const LoadCase& load,
                                               const Eigen::MatrixXd& F, const Eigen::MatrixXd& R, const char* not_spd);

@@ -1,4 +1,5 @@
 #include "emu/solvers/fem_solver.h"
+#include "emu/solvers/fem_solver_testing.h"
 
 #include <algorithm>
 #include <cmath>
@@ -110,22 +111,6 @@ void FemSolver::vertex_forces(const Eigen::Vector3d& grav, Eigen::MatrixX3d& f) 
   if (grav.squaredNorm() > 0)
     for (Eigen::Index v = 0; v < f.rows(); ++v)
       if (layout_.vertex_bone(v) >= 0) f.row(v) -= gravity_work::vertex_gradient(layout_.lumped_mass(v), grav).transpose();
-}
-
-double FemSolver::energy(const LoadCase& load, const Eigen::MatrixX3d& x) const {
-  validate_load(model_, load);
-  return energy_with(x, tet_activation(model_, load), load.gravity) + contact_energy(x);
-}
-
-Eigen::MatrixX3d FemSolver::gradient(const LoadCase& load, const Eigen::MatrixX3d& x) const {
-  validate_load(model_, load);
-  Eigen::VectorXd g;
-  free_gradient(load, x, tet_activation(model_, load), g);
-  Eigen::MatrixX3d out = Eigen::MatrixX3d::Zero(x.rows(), 3);
-  const Eigen::MatrixX3d gc = contact_gradient(x);
-  for (Eigen::Index v = 0; v < x.rows(); ++v)
-    if (layout_.free_index(v) >= 0) out.row(v) = g.segment<3>(3 * layout_.free_index(v)).transpose() + gc.row(v);
-  return out;
 }
 
 double FemSolver::contact_energy(const Eigen::MatrixX3d& x) const {
@@ -665,34 +650,37 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
   return x;
 }
 
-double FemSolver::reduced_energy(const LoadCase& load, const Eigen::MatrixX3d& x0, const Eigen::VectorXd& z) {
-  validate_load(model_, load);
-  const int ns = 3 * layout_.num_free, nd = bones_.dofs();
+// FemSolverTesting's pieces that take the Newton state defined above (declared in fem_solver_testing.h).
+
+double FemSolverTesting::reduced_energy(FemSolver& s, const LoadCase& load, const Eigen::MatrixX3d& x0,
+                                        const Eigen::VectorXd& z) {
+  validate_load(s.model_, load);
+  const int ns = 3 * s.layout_.num_free, nd = s.bones_.dofs();
   if (z.size() != ns + nd)
     throw std::invalid_argument("z must have 3 #free + #bone unknowns = " + std::to_string(ns + nd) + " entries");
-  Newton newton(*this, load, tet_activation(model_, load), &x0);
+  FemSolver::Newton newton(s, load, tet_activation(s.model_, load), &x0);
   newton.set_direction(z.head(ns), z.tail(nd));
   return newton.trial_energy(1.0);
 }
 
-void FemSolver::reduced_system(const LoadCase& load, const Eigen::MatrixX3d& x0, bool exact,
-                               Eigen::VectorXd& gradient, Eigen::MatrixXd& hessian) {
-  validate_load(model_, load);
-  const Eigen::VectorXd act = tet_activation(model_, load);
-  Newton newton(*this, load, act, &x0);
-  const int ns = 3 * layout_.num_free, nd = bones_.dofs();
+void FemSolverTesting::reduced_system(FemSolver& s, const LoadCase& load, const Eigen::MatrixX3d& x0, bool exact,
+                                      Eigen::VectorXd& gradient, Eigen::MatrixXd& hessian) {
+  validate_load(s.model_, load);
+  const Eigen::VectorXd act = tet_activation(s.model_, load);
+  FemSolver::Newton newton(s, load, act, &x0);
+  const int ns = 3 * s.layout_.num_free, nd = s.bones_.dofs();
   gradient.resize(ns + nd);
   gradient << newton.soft_gradient(), newton.bone_gradient();
-  assemble_hessian(newton.positions(), act, exact);
+  s.assemble_hessian(newton.positions(), act, exact);
   hessian.setZero(ns + nd, ns + nd);
-  const auto& cp = pattern_.col_ptr();
-  const auto& ri = pattern_.row_index();
-  for (int j = 0; j < pattern_.rows(); ++j)
-    for (int k = cp[j]; k < cp[j + 1]; ++k) hessian(ri[k], j) = hessian(j, ri[k]) = values_[k];
-  if (has_contact()) {
-    set_contact_hessian(newton.positions());
-    for (int j = 0; j < contact_soft_.outerSize(); ++j)
-      for (Eigen::SparseMatrix<double>::InnerIterator it(contact_soft_, j); it; ++it) {
+  const auto& cp = s.pattern_.col_ptr();
+  const auto& ri = s.pattern_.row_index();
+  for (int j = 0; j < s.pattern_.rows(); ++j)
+    for (int k = cp[j]; k < cp[j + 1]; ++k) hessian(ri[k], j) = hessian(j, ri[k]) = s.values_[k];
+  if (s.has_contact()) {
+    s.set_contact_hessian(newton.positions());
+    for (int j = 0; j < s.contact_soft_.outerSize(); ++j)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(s.contact_soft_, j); it; ++it) {
         hessian(it.row(), j) += it.value();
         if (it.row() != j) hessian(j, it.row()) += it.value();
       }

@@ -30,11 +30,6 @@ class FemSolver {
   /// initial  #V by 3 start positions (nullptr: rest); pinned rows are replaced by the load's.
   SolveResult solve(const LoadCase& load, const Eigen::MatrixX3d* initial = nullptr);
 
-  /// Total energy E_FEM(x) (no rest offset) and its gradient over all vertices (#V by 3,
-  /// zero rows at pinned vertices) for positions x (#V by 3).
-  double energy(const LoadCase& load, const Eigen::MatrixX3d& x) const;
-  Eigen::MatrixX3d gradient(const LoadCase& load, const Eigen::MatrixX3d& x) const;
-
   /// Which Newton matrix newton_correction uses: the exact one (where it is
   /// definite), the PSD-filtered one, or both and the step that ends at the
   /// lower FEM energy (measured to estimate EMU's error best: docs/DESIGN.md).
@@ -61,16 +56,6 @@ class FemSolver {
                                      CorrectionHessian hessian = CorrectionHessian::LowerEnergy,
                                      int max_steps = 1);
 
-  /// The Newton system in the solver's reduced unknowns z = (displacements of
-  /// the free soft vertices, 3 #free; then the bone increments: exponential-map
-  /// turns, translations of free bones) about the start state x0 (#V by 3; each
-  /// bone at the best rigid fit of its rows, on its joints), for tests:
-  /// the energy at increment z, and the gradient and dense Hessian (exact, or
-  /// PSD-filtered) at z = 0. Small meshes only (the Hessian is dense).
-  double reduced_energy(const LoadCase& load, const Eigen::MatrixX3d& x0, const Eigen::VectorXd& z);
-  void reduced_system(const LoadCase& load, const Eigen::MatrixX3d& x0, bool exact, Eigen::VectorXd& gradient,
-                      Eigen::MatrixXd& hessian);
-
   /// Called with every iterate of the following solves (see SolverOptions::on_iteration); empty: none.
   void set_on_iteration(std::function<bool(const IterationRecord&, const Eigen::MatrixX3d&)> f) {
     options_.on_iteration = std::move(f);
@@ -86,6 +71,7 @@ class FemSolver {
 
  private:
   class Newton;  // one solve's state, as the Newton driver sees it (fem_solver.cpp)
+  friend struct FemSolverTesting;  // the pieces one at a time, for tests (fem_solver_testing.h)
   /// The free rows of the gradient (3 #free) at x; fills the corner forces that vertex_forces reads.
   void free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x, const Eigen::VectorXd& act,
                      Eigen::VectorXd& g) const;

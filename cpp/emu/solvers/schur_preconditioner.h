@@ -14,19 +14,22 @@
 #include "emu/mesh/block_pattern.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
+#include "emu/solvers/block_preconditioner.h"
 #include "emu/solvers/schur_form.h"
 
 namespace emu {
 
-class SchurPreconditioner {
+class SchurPreconditioner final : public BlockPreconditioner {
  public:
   SchurPreconditioner(const Model& model, const UnknownLayout& layout, const AcapOperator& acap, double alpha);
 
   /// Rebuild from SPD blocks A_t; false if S could not be factorised.
-  bool update(const std::vector<Mat9>& A);
+  bool update(const std::vector<Mat9>& A) override;
+  const char* failure() const override { return "Schur-complement preconditioner could not be factorised"; }
+  bool factorises_on_update() const override { return true; }
 
   /// out = H^-1 r (9 x #T each).
-  void apply(const Mat9X& r, Mat9X& out) const;
+  void apply(const Mat9X& r, Mat9X& out) const override;
 
   double factor_nnz() const { return factor_.factor_nnz(); }
   /// Bytes held: the factor's entries, the block inverses and the assembly buffers.
@@ -34,7 +37,10 @@ class SchurPreconditioner {
     return 8.0 * (factor_nnz() + element_.size() + values_.size()) + sizeof(Mat9) * double(Ainv_.size());
   }
   /// A new alpha for the following update() calls.
-  void set_alpha(double alpha) { alpha_ = alpha; }
+  void set_alpha(double alpha) override { alpha_ = alpha; }
+  void add_structures(std::vector<std::pair<std::string, double>>& out) const override {
+    out.emplace_back("Schur preconditioner", bytes());
+  }
 
  private:
   const Model& model_;

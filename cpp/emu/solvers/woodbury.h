@@ -25,26 +25,35 @@
 #include "emu/linalg/modes.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
+#include "emu/solvers/block_preconditioner.h"
 #include "emu/solvers/schur_form.h"
 
 namespace emu {
 
-class Woodbury {
+class Woodbury final : public BlockPreconditioner {
  public:
   /// modes  scalar constrained modes (acap.dofs() by ks) and their eigenvalues
   Woodbury(const Model& model, const UnknownLayout& layout, const AcapOperator& acap, const Modes& modes,
            double alpha);
 
   /// Invert the blocks A_u (one per unknown, SPD) and form X with one symmetric
-  /// rank update (SYRK). Returns false if X is not SPD (apply() then uses A^-1).
-  bool update(const std::vector<Mat9>& A);
+  /// rank update (SYRK). Always usable: where X is not SPD apply() uses A^-1
+  /// (low_rank_term() says which).
+  bool update(const std::vector<Mat9>& A) override;
+  const char* failure() const override { return ""; }
+  /// Whether the last update's X was SPD (apply() includes the modes' term).
+  bool low_rank_term() const { return ks_ == 0 || x_ok_; }
 
   /// out = H_k^-1 r; r, out are 9 x #unknowns.
-  void apply(const Mat9X& r, Mat9X& out) const;
+  void apply(const Mat9X& r, Mat9X& out) const override;
 
   int k() const { return 3 * ks_; }
   /// A new alpha for the following update() calls (the modes do not depend on it).
-  void set_alpha(double alpha) { alpha_ = alpha; }
+  void set_alpha(double alpha) override { alpha_ = alpha; }
+  void add_structures(std::vector<std::pair<std::string, double>>& out) const override {
+    if (k() > 0) out.emplace_back("ACAP modes", mode_bytes());
+    out.emplace_back("Woodbury block inverses", block_bytes());
+  }
   /// Bytes held: the modes (at the position unknowns and the vertices), and
   /// the block inverses (one per unknown) with the k x k system X.
   double mode_bytes() const { return 8.0 * (psi_.size() + psi_vertex_.size() + values_.size()); }
