@@ -69,6 +69,13 @@ PositionTerm python_position_term(const py::object& obj) {
   return t;
 }
 
+PositionTerm contact_term(const py::object& term) {
+  return term.is_none() ? PositionTerm() : python_position_term(term);
+}
+constexpr const char* kContactDoc =
+    "contact: barriers on the positions (EMU: on its fit), an object with energy(x), gradient(x), hessian(x) "
+    "(scipy.sparse, 3n x 3n), max_step(x0, x1) and check_start(x) (emu.contact.ContactTerm); None: no contact";
+
 py::dict record_dict(const IterationRecord& e) {
   py::dict d;
   d["iteration"] = e.iteration;
@@ -131,16 +138,7 @@ void bind_options(py::module_& m) {
       .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite)
       .def_readwrite("negative_curvature", &SolverOptions::negative_curvature)
       .def_readwrite("lagged_cg_iterations", &SolverOptions::lagged_cg_iterations)
-      .def_readwrite("lagged_cg_forcing", &SolverOptions::lagged_cg_forcing)
-      .def(
-          "set_contact",
-          [](SolverOptions& o, const py::object& term) {
-            o.contact = term.is_none() ? PositionTerm() : python_position_term(term);
-          },
-          py::arg("term"),
-          "contact barriers on the positions (FEM): an object with energy(x), gradient(x), hessian(x) "
-          "(scipy.sparse, 3n x 3n), max_step(x0, x1) and check_start(x); None: no contact")
-      .def_property_readonly("has_contact", [](const SolverOptions& o) { return o.contact.active(); });
+      .def_readwrite("lagged_cg_forcing", &SolverOptions::lagged_cg_forcing);
 
   m.def(
       "option_choices",
@@ -210,11 +208,12 @@ void bind_results(py::module_& m) {
 
 void bind_fem_solver(py::module_& m) {
   py::class_<FemSolver>(m, "FemSolver")
-      .def(py::init([](const Model& m, const SolverOptions& o) {
+      .def(py::init([](const Model& m, const SolverOptions& o, const py::object& contact) {
+             PositionTerm term = contact_term(contact);
              py::gil_scoped_release release;
-             return std::make_unique<FemSolver>(m, with_interrupt(o));
+             return std::make_unique<FemSolver>(m, with_interrupt(o), std::move(term));
            }),
-           py::arg("model"), py::arg("options"))
+           py::arg("model"), py::arg("options"), py::arg("contact") = py::none(), kContactDoc)
       .def(
           "solve",
           [](FemSolver& s, const LoadCase& l, const py::object& cb) {
@@ -253,11 +252,12 @@ void bind_fem_solver(py::module_& m) {
 
 void bind_emu_solver(py::module_& m) {
   py::class_<EmuSolver>(m, "EmuSolver")
-      .def(py::init([](const Model& m, const SolverOptions& o, const EmuOptions& e) {
+      .def(py::init([](const Model& m, const SolverOptions& o, const EmuOptions& e, const py::object& contact) {
+             PositionTerm term = contact_term(contact);
              py::gil_scoped_release release;
-             return std::make_unique<EmuSolver>(m, with_interrupt(o), e);
+             return std::make_unique<EmuSolver>(m, with_interrupt(o), e, std::move(term));
            }),
-           py::arg("model"), py::arg("options"), py::arg("emu_options"))
+           py::arg("model"), py::arg("options"), py::arg("emu_options"), py::arg("contact") = py::none(), kContactDoc)
       .def(
           "solve",
           [](EmuSolver& s, const LoadCase& l, const py::object& cb) {

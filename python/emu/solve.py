@@ -276,7 +276,6 @@ class Solver:
                 raise ValueError("lagged_factor does not handle contact yet (the contact pairs change the "
                                  "Newton matrix's pattern); leave it off for scenes with contact")
             self.contact = ContactTerm(scene, scene.contact)
-            opts.set_contact(self.contact)
             self.settings.update(contact_distance=self.contact.distance, contact_stiffness=self.contact.stiffness)
         if cg_forcing_min is not None:
             if method != "emu" or step != "newton-krylov":
@@ -287,7 +286,7 @@ class Solver:
                 raise ValueError(f"cg_forcing_min must lie in [0, 1) (0: no floor; above 0.5 it acts as 0.5, "
                                  f"the forcing term's cap), got {cg_forcing_min!r}")
         if method == "fem":
-            self._core = self._named(_core.FemSolver, self.model, opts)
+            self._core = self._named(_core.FemSolver, self.model, opts, self.contact)
         else:
             eo = _core.EmuOptions()
             eo.alpha = float(alpha) * self.mu_ref
@@ -323,7 +322,7 @@ class Solver:
                 single_precision_preconditioner = single_precision_s0
             eo.single_precision_preconditioner = (True if single_precision_preconditioner is None
                                                   else bool(single_precision_preconditioner))
-            self._core = self._named(_core.EmuSolver, self.model, opts, eo)
+            self._core = self._named(_core.EmuSolver, self.model, opts, eo, self.contact)
             self.settings.update(alpha=float(alpha), alpha_absolute=eo.alpha, modes=self._core.modes, step=step,
                                  single_precision_preconditioner=eo.single_precision_preconditioner,
                                  preconditioner=preconditioner if step == "newton-krylov" else None,
@@ -608,10 +607,8 @@ class Solver:
             # the corrections of a sequence's frames (and of accuracy mode's
             # re-solves) by PCG on the last factorisation (docs/DESIGN.md)
             opts.lagged_cg_iterations = ESTIMATE_LAGGED_CG   # (without contact: its pattern changes)
-            if self.contact is not None:   # the same energy as EMU's
-                opts.set_contact(self.contact)
-            try:
-                self._estimator = self._named(_core.FemSolver, self.model, opts)
+            try:   # the same energy as EMU's, contact included
+                self._estimator = self._named(_core.FemSolver, self.model, opts, self.contact)
             except ValueError as e:   # e.g. a closed loop of joints (FEM takes trees of bones)
                 self._estimator_error = f"no error estimate: {e}"
         if self._estimator is None:

@@ -10,11 +10,11 @@
 #include "emu/energy/acap_coupling.h"
 #include "emu/energy/gravity_work.h"
 #include "emu/energy/joint_spring.h"
-#include "emu/energy/material.h"
 #include "emu/linalg/rotation.h"
 #include "emu/solvers/bone_coarse_space.h"
 #include "emu/solvers/bone_rotations.h"
 #include "emu/solvers/constant_schur.h"
+#include "emu/solvers/elastic_term.h"
 #include "emu/solvers/newton/newton_driver.h"
 #include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
@@ -27,8 +27,13 @@ namespace {
 double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
 }  // namespace
 
-EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options)
-    : model_((model.validate(), model)), layout_(model_), options_(options), emu_(emu_options) {
+EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options,
+                     PositionTerm contact)
+    : model_((model.validate(), model)),
+      layout_(model_),
+      options_(options),
+      emu_(emu_options),
+      contact_(std::move(contact)) {
   if (!(emu_.alpha > 0) || !std::isfinite(emu_.alpha)) throw std::invalid_argument("alpha must be positive and finite");
   if (emu_.modes < 0) throw std::invalid_argument("the number of modes must be >= 0");
   if (emu_.lbfgs_memory < 1) throw std::invalid_argument("lbfgs_memory must be >= 1");
@@ -181,7 +186,7 @@ void EmuSolver::riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, c
 double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
                                const Mat9X* Fd, double s) const {
   const Eigen::Index m = model_.tets.rows();
-  const auto& V = layout_.geometry.volume;
+  const ElasticTerm elastic(model_, layout_, c.act);
   const auto& wv = acap_->weight_volume();
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
@@ -191,13 +196,7 @@ double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx
       f += s * D->col(u);
       fx += s * Fd->col(t);
     }
-    // Bones are rigid: no elastic energy on rotations.
-    double e = 0.0;
-    if (!layout_.is_bone_tet(t)) {
-      const TetMaterial mat = tet_material(model_, c.act, t);
-      e = V(t) * material_energy(mat, unflatten(f));
-    }
-    tet_energy_[t] = e + acap_coupling::energy(f, fx, emu_.alpha, wv(t));
+    tet_energy_[t] = elastic.energy(t, unflatten(f)) + acap_coupling::energy(f, fx, emu_.alpha, wv(t));
   }
   double E = 0;
   for (Eigen::Index t = 0; t < m; ++t) E += tet_energy_[t];
@@ -211,6 +210,7 @@ double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx
 
 void EmuSolver::gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx, Mat9X& g) const {
   const Eigen::Index m = model_.tets.rows();
+  const ElasticTerm elastic(model_, layout_, c.act);
   const auto& V = layout_.geometry.volume;
   const auto& wv = acap_->weight_volume();
   Mat9X per_tet(9, m);
@@ -218,10 +218,7 @@ void EmuSolver::gradient_into(const Context& c, const Mat9X& F, const Mat9X& Fx,
   for (Eigen::Index t = 0; t < m; ++t) {
     const auto Fu = F.col(layout_.tet_unknown(t));
     Vec9 gt = acap_coupling::gradient(Fu, Fx.col(t), emu_.alpha, wv(t));
-    if (!layout_.is_bone_tet(t)) {
-      const TetMaterial mat = tet_material(model_, c.act, t);
-      gt += V(t) * flatten(material_stress(mat, unflatten(Fu)));
-    }
+    if (elastic.active(t)) gt += V(t) * flatten(elastic.stress(t, unflatten(Fu)));
     if (c.has_gravity) gt -= wv(t) * c.F_gravity.col(t);
     per_tet.col(t) = gt;
   }
@@ -236,6 +233,7 @@ void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>*
   // unfiltered (A_exact); a bone's block is the coupling of all its tets
   // (rigid: no material).
   const EigenFilter filter = options_.eigen_filter;
+  const ElasticTerm elastic(model_, layout_, c.act);
   const int nu = layout_.num_unknowns, ns = layout_.num_soft;
   const auto& V = layout_.geometry.volume;
   const auto& wv = acap_->weight_volume();
@@ -252,8 +250,7 @@ void EmuSolver::blocks_into(const Context& c, const Mat9X& F, std::vector<Mat9>*
   for (int u = 0; u < ns; ++u) {
     const int t = layout_.unknown_tets[u];
     Mat9 H_psd, H;
-    material_hessians(tet_material(model_, c.act, t), unflatten(F.col(u)), filter, A ? &H_psd : nullptr,
-                      A_exact ? &H : nullptr);
+    elastic.hessians(t, unflatten(F.col(u)), filter, A ? &H_psd : nullptr, A_exact ? &H : nullptr);
     const double coupling = acap_coupling::hessian_diagonal(emu_.alpha, wv(t));
     if (A) {
       (*A)[u] = V(t) * H_psd;
@@ -382,7 +379,7 @@ void EmuSolver::position_force_to_unknowns(const Eigen::MatrixX3d& f, Mat9X& out
 
 void EmuSolver::add_contact_gradient(const Eigen::MatrixX3d& x, Mat9X& g) const {
   if (!has_contact()) return;
-  const Eigen::MatrixX3d gx = options_.contact.checked_gradient(x);
+  const Eigen::MatrixX3d gx = contact_.checked_gradient(x);
   if (gx.isZero(0.0)) return;
   Mat9X gF;
   position_force_to_unknowns(gx, gF);
@@ -467,7 +464,7 @@ class EmuSolver::Newton {
       : s_(s), c_(c), bones_(s.layout_.num_bones > 0), F_(std::move(F)), coarse_(s.layout_, s.emu_.alpha, s.follow_fields()) {
     s_.fit_into(c_, F_, x_, Fx_);
     E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_) + s_.contact_energy(x_);
-    if (s_.has_contact()) s_.options_.contact.check_start_state(x_, E_);
+    if (s_.has_contact()) s_.contact_.check_start_state(x_, E_);
     update_gradient();
   }
 
@@ -490,7 +487,7 @@ class EmuSolver::Newton {
     const std::vector<Mat9>& H = exact ? A_exact_ : A_;
     if (s_.has_contact()) {
       ScopedSeconds timer(time.hessian);
-      Hc_ = s_.options_.contact.checked_hessian(x_);
+      Hc_ = s_.contact_.checked_hessian(x_);
     }
     const auto product = [&](const Mat9X& v, Mat9X& out) { hessian_product(H, exact, v, out); };
     for (Mat9X& r : recycled_) s_.project_tangent(F_, r);  // tangent at the current bones
@@ -521,7 +518,7 @@ class EmuSolver::Newton {
     s_.retract(F_, d_, s, Ftrial_);
     s_.fit_into(c_, Ftrial_, xtrial_, Fxtrial_);
     // the fit's path along a bone's retraction is not straight: its CCD is checked per trial
-    if (s_.has_contact() && s_.options_.contact.max_step(x_, xtrial_) < 1.0)
+    if (s_.has_contact() && s_.contact_.max_step(x_, xtrial_) < 1.0)
       return std::numeric_limits<double>::infinity();
     return s_.energy_along(c_, Ftrial_, Fxtrial_, nullptr, nullptr, 0.0) - s_.load_work(c_, xtrial_) +
            s_.contact_energy(xtrial_);
@@ -736,12 +733,12 @@ class EmuSolver::Newton {
   // Contact: the largest step s <= 1 along d_ whose fitted positions' straight
   // path creates no intersection (without bones x*(F + s d) = x + s dx exactly).
   double collision_free_step() {
-    if (!bones_) return s_.options_.contact.max_step(x_, x_ + dx_);
+    if (!bones_) return s_.contact_.max_step(x_, x_ + dx_);
     Mat9X F1, Fx1;
     Eigen::MatrixX3d x1;
     s_.retract(F_, d_, 1.0, F1);
     s_.fit_into(c_, F1, x1, Fx1);
-    return s_.options_.contact.max_step(x_, x1);
+    return s_.contact_.max_step(x_, x1);
   }
  public:
   /// The round-off of grad_norm() here: |gR(F') - gR(F)| / sqrt 2, F' = F

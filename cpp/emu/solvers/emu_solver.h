@@ -28,6 +28,7 @@
 #include <utility>
 
 #include "emu/linalg/modes.h"
+#include "emu/contact/position_term.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
 #include "emu/solvers/block_preconditioner.h"
@@ -38,7 +39,9 @@ namespace emu {
 
 class EmuSolver {
  public:
-  EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options);
+  /// contact  barriers on the fitted positions x*(F) (an inactive term: none)
+  EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options,
+            PositionTerm contact = {});
 
   /// F0  #T by 9 start (vec(F) column-major per row, per tet as in SolveResult::F;
   ///     a bone's F is read from its first tet; nullptr: identity)
@@ -122,11 +125,11 @@ class EmuSolver {
   void riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                           bool curvature, Mat9X& out) const;
   Mat9X to_cols(const Eigen::MatrixXd& rows) const;
-  // Contact (SolverOptions::contact) on the fitted positions x = x*(F):
+  // Contact on the fitted positions x = x*(F):
   //   E_c(x*(F)),  dE_c/dF = C^T K_c^-1 S^T g_x  (one back-substitution),
   //   Hessian J^T H_c J with J = dx*/dF = S K_c^-1 C (two per product).
-  bool has_contact() const { return options_.contact.active(); }
-  double contact_energy(const Eigen::MatrixX3d& x) const { return has_contact() ? options_.contact.energy(x) : 0.0; }
+  bool has_contact() const { return contact_.active(); }
+  double contact_energy(const Eigen::MatrixX3d& x) const { return has_contact() ? contact_.energy(x) : 0.0; }
   /// out (9 x #T) = F_t(S K_c^-1 S^T f) for vertex forces f (#V by 3): the fit of
   /// the forces (one back-substitution); w_t V_t times it is C^T K_c^-1 S^T f.
   void force_fit(const Eigen::MatrixX3d& f, Mat9X& out) const;
@@ -141,6 +144,7 @@ class EmuSolver {
   UnknownLayout layout_;
   SolverOptions options_;
   EmuOptions emu_;
+  PositionTerm contact_;
   std::unique_ptr<AcapOperator> acap_;
   std::unique_ptr<BlockPreconditioner> preconditioner_;  // EmuOptions::preconditioner's (block_preconditioner.h)
   int modes_ = 0;

@@ -50,7 +50,7 @@ Eigen::MatrixXd EmuSolverTesting::hessian_product(const EmuSolver& s, const Load
     Eigen::MatrixX3d x;
     Mat9X Fx;
     s.fit_into(c, F, x, Fx);
-    s.add_position_hessian_product(s.options_.contact.checked_hessian(x), V, out);
+    s.add_position_hessian_product(s.contact_.checked_hessian(x), V, out);
   }
   return out.transpose();
 }

@@ -9,7 +9,7 @@
 #include <string>
 
 #include "emu/energy/gravity_work.h"
-#include "emu/energy/material.h"
+#include "emu/solvers/elastic_term.h"
 #include "emu/linalg/negative_curvature.h"
 #include "emu/linalg/symmetric_product.h"
 #include "emu/solvers/newton/pcg.h"
@@ -18,10 +18,11 @@
 
 namespace emu {
 
-FemSolver::FemSolver(const Model& model, const SolverOptions& options)
+FemSolver::FemSolver(const Model& model, const SolverOptions& options, PositionTerm contact)
     : model_((model.validate(), model)),
       layout_(model_),
       options_(options),
+      contact_(std::move(contact)),
       pattern_(model_.tets, layout_.free_index, layout_.num_free, 3),
       bones_(model_, layout_) {
   const auto t0 = Clock::now();
@@ -47,15 +48,10 @@ double FemSolver::energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& 
                               const Eigen::Vector3d& grav) const {
   const Eigen::Index m = model_.tets.rows();
   const auto& geo = layout_.geometry;
+  const ElasticTerm elastic(model_, layout_, act);
 #pragma omp parallel for schedule(static)
-  for (Eigen::Index t = 0; t < m; ++t) {
-    if (layout_.is_bone_tet(t)) {  // rigid: no elastic energy
-      tet_energy_[t] = 0.0;
-      continue;
-    }
-    const TetMaterial mat = tet_material(model_, act, t);
-    tet_energy_[t] = geo.volume(t) * material_energy(mat, deformation_gradient(geo.grad[t], x, model_.tets, t));
-  }
+  for (Eigen::Index t = 0; t < m; ++t)
+    tet_energy_[t] = elastic.active(t) ? elastic.energy(t, deformation_gradient(geo.grad[t], x, model_.tets, t)) : 0.0;
   double E = 0;
   for (Eigen::Index t = 0; t < m; ++t) E += tet_energy_[t];  // fixed order: reproducible
   if (grav.squaredNorm() > 0) E -= gravity_work::energy(layout_.lumped_mass, x, grav);
@@ -66,14 +62,14 @@ void FemSolver::free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x,
                               const Eigen::VectorXd& act, Eigen::VectorXd& g) const {
   const Eigen::Index m = model_.tets.rows();
   const auto& geo = layout_.geometry;
+  const ElasticTerm elastic(model_, layout_, act);
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
-    if (layout_.is_bone_tet(t)) {
+    if (!elastic.active(t)) {
       Eigen::Map<Vec12>(corner_.data() + t * 12).setZero();
       continue;
     }
-    const TetMaterial mat = tet_material(model_, act, t);
-    const Mat3 P = material_stress(mat, deformation_gradient(geo.grad[t], x, model_.tets, t));
+    const Mat3 P = elastic.stress(t, deformation_gradient(geo.grad[t], x, model_.tets, t));
     Eigen::Map<Vec12>(corner_.data() + t * 12) = geo.volume(t) * corner_vectors(geo.grad[t], P);
   }
   g.resize(layout_.num_free * 3);
@@ -87,15 +83,16 @@ void FemSolver::assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorX
   const EigenFilter filter = options_.eigen_filter;
   const Eigen::Index m = model_.tets.rows();
   const auto& geo = layout_.geometry;
+  const ElasticTerm elastic(model_, layout_, act);
 #pragma omp parallel for schedule(static)
   for (Eigen::Index t = 0; t < m; ++t) {
-    if (layout_.is_bone_tet(t)) {
+    if (!elastic.active(t)) {
       Eigen::Map<Mat12>(element_.data() + t * 144).setZero();
       continue;
     }
-    const TetMaterial mat = tet_material(model_, act, t);
     const Mat3 F = deformation_gradient(geo.grad[t], x, model_.tets, t);
-    const Mat9 H = exact ? material_hessian(mat, F) : material_hessian_psd(mat, F, filter);
+    Mat9 H;
+    elastic.hessians(t, F, filter, exact ? nullptr : &H, exact ? &H : nullptr);
     Eigen::Map<Mat12>(element_.data() + t * 144) = geo.volume(t) * position_hessian(geo.grad[t], H);
   }
   pattern_.assemble(element_.data(), values_.data());
@@ -114,15 +111,15 @@ void FemSolver::vertex_forces(const Eigen::Vector3d& grav, Eigen::MatrixX3d& f) 
 }
 
 double FemSolver::contact_energy(const Eigen::MatrixX3d& x) const {
-  return has_contact() ? options_.contact.energy(x) : 0.0;
+  return has_contact() ? contact_.energy(x) : 0.0;
 }
 
 Eigen::MatrixX3d FemSolver::contact_gradient(const Eigen::MatrixX3d& x) const {
-  return has_contact() ? options_.contact.checked_gradient(x) : Eigen::MatrixX3d::Zero(x.rows(), 3);
+  return has_contact() ? contact_.checked_gradient(x) : Eigen::MatrixX3d::Zero(x.rows(), 3);
 }
 
 void FemSolver::set_contact_hessian(const Eigen::MatrixX3d& x) {
-  contact_H_ = options_.contact.checked_hessian(x);
+  contact_H_ = contact_.checked_hessian(x);
   // Its free-vertex block in the soft rows, upper triangle (as values_ holds K).
   std::vector<Eigen::Triplet<double>> upper;
   for (int j = 0; j < contact_H_.outerSize(); ++j) {
@@ -203,7 +200,7 @@ class FemSolver::Newton {
     poses_ = s_.bones_.begin(load_, x_, initial);
     s_.bones_.place(poses_, x_);
     E_ = s_.energy_with(x_, act_, load_.gravity) + s_.bones_.spring_energy(poses_) + s_.contact_energy(x_);
-    if (s_.has_contact()) s_.options_.contact.check_start_state(x_, E_);
+    if (s_.has_contact()) s_.contact_.check_start_state(x_, E_);
     reduced_gradient(x_, poses_, gs_, gb_);
     gn_ = s_.bones_.gradient_norm(gs_.squaredNorm(), gb_);
     g0_ = gn_;
@@ -300,7 +297,7 @@ class FemSolver::Newton {
     Eigen::MatrixX3d x1;
     BonePoses poses1;
     step_positions(1.0, x1, poses1);
-    const double s = s_.options_.contact.max_step(x_, x1);
+    const double s = s_.contact_.max_step(x_, x1);
     if (!(s > 0)) return false;
     if (s < 1) {
       ds_ *= s;
@@ -312,7 +309,7 @@ class FemSolver::Newton {
   double trial_energy(double s) {
     trial_ = x_;
     step_positions(s, trial_, trial_poses_);
-    if (s_.has_contact() && nd_ && s_.options_.contact.max_step(x_, trial_) < 1.0)
+    if (s_.has_contact() && nd_ && s_.contact_.max_step(x_, trial_) < 1.0)
       return std::numeric_limits<double>::infinity();  // the straight path to it crosses a surface
     return s_.energy_with(trial_, act_, load_.gravity) + s_.bones_.spring_energy(nd_ ? trial_poses_ : poses_) +
            s_.contact_energy(trial_);

@@ -16,6 +16,7 @@
 
 #include "emu/linalg/cholmod_factor.h"
 #include "emu/mesh/block_pattern.h"
+#include "emu/contact/position_term.h"
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/newton/result.h"
 #include "emu/solvers/rigid_bones.h"
@@ -25,7 +26,10 @@ namespace emu {
 
 class FemSolver {
  public:
-  FemSolver(const Model& model, const SolverOptions& options);
+  /// contact  barriers on the positions, added to the energy, gradient and
+  ///          Newton matrix, every step capped by continuous collision
+  ///          detection (an inactive term: none)
+  FemSolver(const Model& model, const SolverOptions& options, PositionTerm contact = {});
 
   /// initial  #V by 3 start positions (nullptr: rest); pinned rows are replaced by the load's.
   SolveResult solve(const LoadCase& load, const Eigen::MatrixX3d* initial = nullptr);
@@ -84,9 +88,9 @@ class FemSolver {
   /// The round-off level of the gradient norm (see Convergence).
   double gradient_floor(const Eigen::VectorXd& act) const;
 
-  // Contact (SolverOptions::contact): its energy and gradient at x (0 / zero
+  // Contact: its energy and gradient at x (0 / zero
   // rows without contact) and the Newton matrix with its Hessian.
-  bool has_contact() const { return options_.contact.active(); }
+  bool has_contact() const { return contact_.active(); }
   double contact_energy(const Eigen::MatrixX3d& x) const;
   Eigen::MatrixX3d contact_gradient(const Eigen::MatrixX3d& x) const;
   /// contact_H_ = the contact Hessian at x, and contact_soft_ its free-vertex
@@ -101,6 +105,7 @@ class FemSolver {
   Model model_;
   UnknownLayout layout_;
   SolverOptions options_;
+  PositionTerm contact_;
   BlockPattern pattern_;
   CholmodFactor factor_;
   RigidBones bones_;

@@ -4,7 +4,6 @@
 
 #include <Eigen/Core>
 
-#include "emu/contact/position_term.h"
 #include "emu/energy/psd_project.h"
 
 namespace emu {
@@ -60,10 +59,6 @@ struct SolverOptions {
   // every accepted iterate; returning true stops the solve with status
   // "stopped by on_iteration" (error-against-time curves, custom stopping).
   std::function<bool(const IterationRecord&, const Eigen::MatrixX3d&)> on_iteration;
-  // Contact barriers on the positions (none when inactive): added to the
-  // energy, gradient and Newton matrix (EMU: on the fit x*(F)); every step
-  // capped by continuous collision detection (contact/position_term.h).
-  PositionTerm contact;
 };
 
 // EMU's step: the paper's Woodbury quasi-Newton step, Newton-Krylov (PCG on
