@@ -175,10 +175,11 @@ def ipctk_zero(n):
 
 def _emu_rows(solver, sol):
     """EMU's unknowns (#unknowns by 9, vec(F) column-major) from a Solution."""
-    F = sol.F[solver._model_tets].transpose(0, 2, 1).reshape(-1, 9)
+    F = sol.F.transpose(0, 2, 1).reshape(-1, 9)   # per scene tet
     first = {}
     for t, u in enumerate(np.asarray(solver._core.tet_unknown)):
-        first.setdefault(int(u), t)
+        if u >= 0:
+            first.setdefault(int(u), t)
     return F[[first[u] for u in range(len(first))]]
 
 

@@ -40,10 +40,11 @@ def choose_scalar_modes(L, lo=6, hi=20, gap=1e-3):
 
 
 class Reference:
-    """The independent numpy model of one EmuSolver."""
+    """The independent numpy model of one EmuSolver (its tets in the order the
+    solver stores them: one F unknown per tet, in that order, on these scenes)."""
 
     def __init__(self, solver):
-        md = solver.model
+        md = solver._core.model
         self.solver, self.core = solver, solver._core
         self.rest = np.asarray(md.rest)
         self.tets = np.asarray(md.tets).astype(np.int64)
@@ -422,7 +423,7 @@ def test_modes_by_lanczos_on_a_larger_mesh():
     nfree = len(s.points) - len(s.model_pins()[0])
     assert nfree > 400
     solver = emu.Solver(s, "emu", alpha=100.0, modes=3, preconditioner="woodbury")
-    md = solver.model
+    md = solver._core.model   # its tets in the solver's order
     G, vol = gradient_operator(np.asarray(md.rest), np.asarray(md.tets).astype(np.int64))
     free = np.setdiff1d(np.arange(len(md.rest)), np.asarray(md.pinned))
     Dd = np.repeat(np.asarray(md.acap_weight) * vol, 9)

@@ -107,7 +107,7 @@ def test_emu_positions_are_the_fem_equilibrium_of_the_enveloped_energy(alpha):
     solver = emu.Solver(s, "emu", alpha=alpha, rtol_grad=1e-10, error_estimate=False)
     sol = solver.solve({"belly": 5e4})
     assert sol.converged, sol.status
-    md = solver.model
+    md = solver._core.model   # the tets in the solver's order (its unknowns' order)
     a = np.where(np.asarray(md.muscle) >= 0, 5e4, 0.0)
     ref = EnvelopeFEM(np.asarray(md.rest), np.asarray(md.tets).astype(np.int64), np.asarray(md.fiber),
                       np.asarray(md.mu), np.asarray(md.lam), a, np.asarray(md.acap_weight),
@@ -124,4 +124,4 @@ def test_emu_positions_are_the_fem_equilibrium_of_the_enveloped_energy(alpha):
     assert emu.vertex_error(sol, fem) > 1e-3
     # EMU's F are the inner minimisers of the envelope at its positions
     Fref = ref.Fs
-    np.testing.assert_allclose(sol.F[solver._model_tets], Fref, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(sol.F[np.asarray(md.scene_tet)], Fref, rtol=0, atol=1e-6)

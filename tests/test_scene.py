@@ -9,7 +9,7 @@ import pytest
 import emu
 from emu.joints import Joint
 from emu.geometry import tet_vertices
-from emu.lowering import build_model, model_tet_order, tet_fibers
+from emu.lowering import build_model, tet_fibers
 
 from conftest import bone_muscle_bone, gap_scene
 
@@ -56,7 +56,7 @@ def test_build_model_does_not_change_the_scene():
     c.resolve_fibers()
     resolved = np.zeros((len(s.tets), 3))
     resolved[c.parts["belly"].tets] = c.parts["belly"].fibers
-    np.testing.assert_array_equal(fa, resolved[model_tet_order(s)])   # the model's tets in its order
+    np.testing.assert_array_equal(fa, resolved[s.model_tets])   # the model's tets: the scene's order
     np.testing.assert_array_equal(tet_fibers(s)[s.parts["belly"].tets], c.parts["belly"].fibers)
 
 
@@ -81,8 +81,8 @@ def test_given_fibres_pass_through_untouched():
     before = snapshot(s)
     model = build_model(s)
     assert_unchanged(s, before)
-    keep = model_tet_order(s)
-    np.testing.assert_array_equal(np.asarray(model.fiber), tet_fibers(s)[keep])
+    np.testing.assert_array_equal(np.asarray(model.scene_tet), s.model_tets)
+    np.testing.assert_array_equal(np.asarray(model.fiber), tet_fibers(s)[s.model_tets])
     np.testing.assert_array_equal(tet_fibers(s)[s.parts["belly"].tets], s.parts["belly"].fibers)
     with pytest.raises(ValueError, match=r"fibers must have shape"):
         build_model(s, fibers=np.zeros((3, 3)))

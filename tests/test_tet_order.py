@@ -1,11 +1,14 @@
-"""The solvers store a scene's tets along a Z-order curve (emu.lowering.model_tet_order,
-docs/DESIGN.md "Tet order"): an internal order that no answer depends on."""
+"""The solvers store a scene's tets along a Z-order curve (the core's along_curve,
+cpp/emu/model/tet_order.h; docs/DESIGN.md "Tet order"): an internal order that no
+answer depends on. The model Python builds lists the tets in the scene's order."""
 import copy
 
 import numpy as np
+import pytest
 
 import emu
-from emu.lowering import build_model, model_tet_order
+from emu._core import FemSolver, SolverOptions
+from emu.lowering import build_model
 
 
 def with_tets_permuted(scene, perm):
@@ -20,17 +23,45 @@ def with_tets_permuted(scene, perm):
     return s
 
 
+def solver_tet_order(scene):
+    """The scene's tet of each tet as a solver stores them."""
+    return np.asarray(FemSolver(build_model(scene), SolverOptions()).model.scene_tet)
+
+
 def test_order_is_a_permutation_of_the_model_tets_and_local():
     s = emu.scenes.arm(2)
-    order = model_tet_order(s)
+    order = solver_tet_order(s)
     np.testing.assert_array_equal(np.sort(order), np.sort(s.model_tets))
     shuffled = with_tets_permuted(s, np.random.default_rng(1).permutation(len(s.tets)))
     c = shuffled.points[shuffled.tets].mean(axis=1)
     given = np.linalg.norm(np.diff(c[shuffled.model_tets], axis=0), axis=1).mean()
-    ordered = np.linalg.norm(np.diff(c[model_tet_order(shuffled)], axis=0), axis=1).mean()
+    ordered = np.linalg.norm(np.diff(c[solver_tet_order(shuffled)], axis=0), axis=1).mean()
     assert ordered < 0.3 * given   # consecutive tets are neighbours, not random ones
+    # the model Python builds: the scene's order; the solver's: every per-tet array carried along
     model = build_model(shuffled)
-    np.testing.assert_array_equal(np.asarray(model.tets), shuffled.tets[model_tet_order(shuffled)])
+    np.testing.assert_array_equal(np.asarray(model.tets), shuffled.tets[shuffled.model_tets])
+    np.testing.assert_array_equal(np.asarray(model.scene_tet), shuffled.model_tets)
+    stored = FemSolver(model, SolverOptions()).model
+    order = np.asarray(stored.scene_tet)
+    np.testing.assert_array_equal(np.asarray(stored.tets), shuffled.tets[order])
+    position = np.searchsorted(shuffled.model_tets, order)   # model tet of each stored tet
+    for name in ("mu", "lam", "acap_weight", "muscle", "bone", "fiber"):
+        np.testing.assert_array_equal(np.asarray(getattr(stored, name)), np.asarray(getattr(model, name))[position])
+    assert stored.num_scene_tets == len(shuffled.tets)
+
+
+def test_scene_tet_is_checked():
+    s = emu.scenes.arm(1)
+    model = build_model(s)
+    bad = np.asarray(model.scene_tet).copy()
+    bad[1] = bad[0]
+    model.scene_tet = bad
+    with pytest.raises(ValueError, match="scene_tet must name distinct scene tets"):
+        FemSolver(model, SolverOptions())
+    model = build_model(s)
+    model.num_scene_tets = 3
+    with pytest.raises(ValueError, match="num_scene_tets must be 0"):
+        FemSolver(model, SolverOptions())
 
 
 def test_answers_do_not_depend_on_the_order_of_the_tets():

@@ -27,6 +27,10 @@ void bind_model(py::module_& m) {
       .def_readwrite("joint_points", &Model::joint_points)
       .def_readwrite("joint_bones", &Model::joint_bones)
       .def_readwrite("bone_stiffness", &Model::bone_stiffness)
+      .def_readwrite("scene_tet", &Model::scene_tet,
+                     "#T: the scene's tet of each tet here (empty: the same index); a solver's model "
+                     "stores its tets in an order of its own")
+      .def_readwrite("num_scene_tets", &Model::num_scene_tets, "tets of the scene (0: #T)")
       .def("validate", &Model::validate);
 
   py::class_<LoadCase>(m, "LoadCase")

@@ -1,7 +1,10 @@
 #include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/stl.h>
 
 #include <memory>
+#include <stdexcept>
+#include <string>
 
 #include "bind.h"
 #include "emu/model/model.h"
@@ -67,6 +70,28 @@ PositionTerm python_position_term(const py::object& obj) {
     o->attr("check_start")(Eigen::MatrixX3d(x));
   };
   return t;
+}
+
+// F per tet as Python sees it, (m, 3, 3), from and to the core's m by 9 rows (F row-major per row).
+py::array_t<double> f_array(const Eigen::MatrixXd& rows) {
+  py::array_t<double> a({static_cast<py::ssize_t>(rows.rows()), py::ssize_t(3), py::ssize_t(3)});
+  auto v = a.mutable_unchecked<3>();
+  for (Eigen::Index t = 0; t < rows.rows(); ++t)
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) v(t, i, j) = rows(t, 3 * i + j);
+  return a;
+}
+Eigen::MatrixXd f_rows(const py::object& F, Eigen::Index count) {
+  const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(F);
+  if (!a || a.ndim() != 3 || a.shape(0) != count || a.shape(1) != 3 || a.shape(2) != 3)
+    throw std::invalid_argument("F0 must be one 3x3 deformation gradient per tet of the scene, shape (" +
+                                std::to_string(count) + ", 3, 3)");
+  const auto v = a.unchecked<3>();
+  Eigen::MatrixXd rows(count, 9);
+  for (Eigen::Index t = 0; t < count; ++t)
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) rows(t, 3 * i + j) = v(t, i, j);
+  return rows;
 }
 
 PositionTerm contact_term(const py::object& term) {
@@ -186,7 +211,9 @@ void bind_results(py::module_& m) {
   py::class_<SolveResult>(m, "SolveResult")
       .def_readonly("phases", &SolveResult::phases)
       .def_readonly("positions", &SolveResult::positions)
-      .def_readonly("F", &SolveResult::F)
+      .def_property_readonly(
+          "F", [](const SolveResult& r) -> py::object { return r.F.size() ? py::object(f_array(r.F)) : py::object(py::none()); },
+          "EMU: (#scene tets, 3, 3) F per tet of the scene (identity where a tet has no unknown); FEM: None")
       .def_readonly("converged", &SolveResult::converged)
       .def_readonly("status", &SolveResult::status)
       .def_readonly("iterations", &SolveResult::iterations)
@@ -229,6 +256,7 @@ void bind_fem_solver(py::module_& m) {
           },
           py::arg("load"), py::arg("x0"), py::arg("on_iteration") = py::none())
       .def("structures", &FemSolver::structures, "(name, bytes) of the structures this solver built")
+      .def_property_readonly("model", &FemSolver::model, "the model as this solver stores it (tets in its order)")
       .def(
           "newton_correction",
           [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0, const std::string& hessian, int max_steps) {
@@ -267,15 +295,27 @@ void bind_emu_solver(py::module_& m) {
           py::arg("load"), py::arg("on_iteration") = py::none())
       .def(
           "solve_from",
-          [](EmuSolver& s, const LoadCase& l, const Eigen::MatrixXd& F0, const py::object& cb) {
+          [](EmuSolver& s, const LoadCase& l, const py::object& F0, const py::object& cb) {
+            const Eigen::MatrixXd rows = f_rows(F0, s.model().scene_tet_count());
             IterationCallbackScope<EmuSolver> scope(s, cb);
-            return run_solve([&] { return s.solve(l, &F0); });
+            return run_solve([&] { return s.solve(l, &rows); });
           },
-          py::arg("load"), py::arg("F0"), py::arg("on_iteration") = py::none())
+          py::arg("load"), py::arg("F0"), py::arg("on_iteration") = py::none(),
+          "a solve from F0, (#scene tets, 3, 3) as SolveResult.F")
       .def("structures", &EmuSolver::structures, "(name, bytes) of the structures this solver built")
       .def_property_readonly("modes", &EmuSolver::modes)
       .def_property_readonly("num_unknowns", &EmuSolver::num_unknowns)
-      .def_property_readonly("tet_unknown", &EmuSolver::tet_unknown, "#T: the F unknown each tet uses (soft tets in order, then one per movable bone)")
+      .def_property_readonly(
+          "tet_unknown",
+          [](const EmuSolver& s) {
+            const Model& m = s.model();
+            Eigen::VectorXi out = Eigen::VectorXi::Constant(m.scene_tet_count(), -1);
+            for (Eigen::Index t = 0; t < m.tets.rows(); ++t) out(m.scene_index(t)) = s.tet_unknown()(t);
+            return out;
+          },
+          "#scene tets: the F unknown each tet of the scene uses (soft tets in the solver's order, then one per "
+          "movable bone; -1: a tet without unknowns)")
+      .def_property_readonly("model", &EmuSolver::model, "the model as this solver stores it (tets in its order)")
       .def_property("alpha", &EmuSolver::alpha, &EmuSolver::set_alpha, "absolute alpha (settable between solves)")
       .def_property("cg_forcing_max", &EmuSolver::cg_forcing_max, &EmuSolver::set_cg_forcing_max,
                     "Eisenstat-Walker cap on the CG forcing term (settable between solves)")

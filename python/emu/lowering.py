@@ -13,19 +13,7 @@ from .fibers import attachment_fibers
 from .geometry import bbox_diagonal
 from .parts import lame
 
-__all__ = ["build_model", "model_tet_order", "tet_fibers", "declared_joint_rows", "declared_joint_world"]
-
-
-def model_tet_order(scene) -> np.ndarray:
-    """The tets that carry unknowns (scene.model_tets) in the order the solvers
-    store them: along a Z-order (Morton) curve through their centroids, so that
-    tets near each other in space are near each other in memory. Meshes from
-    mesh generators and research code often list their tets in no spatial
-    order, and a solver's per-vertex sums then read its per-tet arrays at
-    random (docs/DESIGN.md, "Tet order"). Ties keep the scene's order."""
-    keep = scene.model_tets
-    order = _core.spatial_order(scene.points, scene.tets[keep].astype(np.int32))
-    return keep[np.asarray(order, np.int64)]
+__all__ = ["build_model", "tet_fibers", "declared_joint_rows", "declared_joint_world"]
 
 
 def tet_fibers(scene) -> np.ndarray:
@@ -79,20 +67,20 @@ def declared_joint_world(scene) -> list:
     return out
 
 
-def build_model(scene, fibers=None, tet_order=None) -> "_core.Model":
+def build_model(scene, fibers=None) -> "_core.Model":
     """The flat arrays the C++ solvers take (tets of fixed bones left out), after
     scene.validate(). The scene is not changed. The model's tet t is the
-    scene's tet model_tet_order(scene)[t].
+    scene's tet model.scene_tet[t] (scene.model_tets, in the scene's order; a
+    solver stores them in an order of its own and gives F back per scene tet).
 
     fibers  (m, 3) rest fibre directions per tet of the scene, as from
             tet_fibers(scene) (None: computed here)
-    tet_order  model_tet_order(scene), if the caller has it (None: computed here)
     """
     scene.validate()
     fib = tet_fibers(scene) if fibers is None else np.asarray(fibers, dtype=np.float64)
     if fib.shape != (len(scene.tets), 3):
         raise ValueError(f"build_model: fibers must have shape ({len(scene.tets)}, 3), got {fib.shape}")
-    keep = model_tet_order(scene) if tet_order is None else tet_order
+    keep = scene.model_tets
     m = len(scene.tets)
     mu, lam, rho, w = (np.empty(m) for _ in range(4))
     muscle = np.full(m, -1, np.int32)
@@ -113,6 +101,8 @@ def build_model(scene, fibers=None, tet_order=None) -> "_core.Model":
     model.mu, model.lam, model.density, model.acap_weight = mu[keep], lam[keep], rho[keep], w[keep]
     model.fiber = fib[keep]
     model.muscle = muscle[keep]
+    model.scene_tet = keep.astype(np.int32)
+    model.num_scene_tets = len(scene.tets)
     model.pinned = scene.model_pins()[0].astype(np.int32)
     model.num_muscles = len(names)
     if movable:

@@ -18,7 +18,7 @@ from .contact import ContactTerm
 from .geometry import bbox_diagonal, deformation_gradients, tet_vertices, vertex_error
 from .options import (CHOICES, METHODS, OPTIONS, POSITION_TOL, OptionGroup, check_options, merge_groups,
                       options_text, solver_signature)
-from .lowering import build_model, declared_joint_rows, declared_joint_world, model_tet_order
+from .lowering import build_model, declared_joint_rows, declared_joint_world
 from .poses import parse_pose
 from .runtime import set_threads
 from .scene import Scene
@@ -223,10 +223,9 @@ class Solver:
         self.scene, self.method, self.step = scene, method, step
         self.accuracy = None if accuracy is None else float(accuracy)
         self.alpha = float(alpha)
-        self._model_tets = model_tet_order(scene)  # the scene's tet of each model tet
-        self.model = build_model(scene, tet_order=self._model_tets)
+        self.model = build_model(scene)
         self.fibers = np.zeros((len(scene.tets), 3))
-        self.fibers[self._model_tets] = np.asarray(self.model.fiber)  # muscles always carry unknowns
+        self.fibers[np.asarray(self.model.scene_tet)] = np.asarray(self.model.fiber)  # muscles always carry unknowns
         opts = _core.SolverOptions()
         opts.rtol_grad, opts.rtol_energy = float(rtol_grad), float(rtol_energy)
         opts.noise_factor = float(noise_factor)
@@ -564,10 +563,7 @@ class Solver:
             raise FloatingPointError("the solver produced non-finite positions; this is a bug, please report it")
         h = np.asarray(r.history)
         history = {name: h[:, i] for i, name in enumerate(HISTORY_COLUMNS)}
-        F = None
-        if self.method == "emu":
-            F = np.tile(np.eye(3), (len(self.scene.tets), 1, 1))  # fixed-bone tets stay at identity
-            F[self._model_tets] = np.asarray(r.F).reshape(-1, 3, 3).transpose(0, 2, 1)  # vec(F) column-major
+        F = None if r.F is None else np.asarray(r.F)   # EMU: per scene tet, identity on fixed bones
         positions = np.asarray(r.positions)
         x1, estimate_s, note = (self._fem_correction_of(load, positions) if self.error_estimate
                                 else (None, 0.0, ""))
@@ -642,7 +638,7 @@ class Solver:
         m = len(self.scene.tets)
         if a.shape != (m, 3, 3):
             raise ValueError(f"initial deformation gradients must have shape ({m}, 3, 3), got {a.shape}")
-        return a[self._model_tets].transpose(0, 2, 1).reshape(-1, 9)
+        return a
 
 
 # help(emu.Solver) and IDEs show every option with its default, from the one table

@@ -79,6 +79,22 @@ void Model::validate() const {
       fail("declared joint " + std::to_string(i) + " names bones (" + std::to_string(a) + ", " + std::to_string(b) +
            "): the first must be a movable bone, the second another movable bone or -1 (the world)");
   }
+  if (num_scene_tets < 0 || (num_scene_tets > 0 && num_scene_tets < m))
+    fail("num_scene_tets must be 0 (the scene's tets are these) or at least #T (" + std::to_string(m) + ")");
+  if (scene_tet.size()) {
+    need(scene_tet.size(), "scene_tet");
+    const Eigen::Index count = scene_tet_count();
+    std::vector<char> seen(count, 0);
+    for (Eigen::Index t = 0; t < m; ++t) {
+      const int s = scene_tet(t);
+      if (s < 0 || s >= count || seen[s])
+        fail("scene_tet must name distinct scene tets in [0, " + std::to_string(count) + "); tet " +
+             std::to_string(t) + " names " + std::to_string(s));
+      seen[s] = 1;
+    }
+  } else if (num_scene_tets > m) {
+    fail("num_scene_tets exceeds #T: give scene_tet, the scene's tet of each tet");
+  }
   if (pinned.size() == 0)
     fail("the scene is not anchored: pin some vertices (scene.pin) or fix a bone; "
          "otherwise it can move freely and no equilibrium is unique");

@@ -38,9 +38,20 @@ struct Model {
   Eigen::VectorXd bone_stiffness;
   int num_muscles = 0;
   int num_bones = 0;
+  // The scene's tet of each tet here (#T; empty: tet t is the scene's tet t),
+  // and the number of the scene's tets (0: #T). A scene's tets that carry no
+  // unknowns (a fixed bone's) are left out; the solvers store the rest in an
+  // order of their own (tet_order.h) and take and give per-tet results in
+  // the scene's order (SolveResult::F).
+  Eigen::VectorXi scene_tet;
+  int num_scene_tets = 0;
 
   /// Throws std::invalid_argument naming the first inconsistency found.
   void validate() const;
+  /// The scene's tet count (num_scene_tets, or #T when it is 0).
+  Eigen::Index scene_tet_count() const { return num_scene_tets > 0 ? num_scene_tets : tets.rows(); }
+  /// The scene's index of tet t.
+  Eigen::Index scene_index(Eigen::Index t) const { return scene_tet.size() ? scene_tet(t) : t; }
 };
 
 /// One frame's loads and boundary values.

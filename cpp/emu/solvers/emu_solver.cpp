@@ -1,3 +1,4 @@
+#include "emu/model/tet_order.h"
 #include "emu/solvers/emu_solver.h"
 
 #include <Eigen/Eigenvalues>
@@ -29,7 +30,7 @@ double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
 
 EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options,
                      PositionTerm contact)
-    : model_((model.validate(), model)),
+    : model_(along_curve(model)),
       layout_(model_),
       options_(options),
       emu_(emu_options),
@@ -434,20 +435,38 @@ double EmuSolver::cold_gradient_norm(const Context& c) const {
 }
 
 Mat9X EmuSolver::start_unknowns(const Eigen::MatrixXd* F0) const {
-  const Eigen::Index m = model_.tets.rows();
   const int nu = layout_.num_unknowns;
   Mat9X F(9, nu);
   if (!F0) {
     for (int u = 0; u < nu; ++u) F.col(u) = flatten(Mat3::Identity());
     return F;
   }
-  if (F0->rows() != m || F0->cols() != 9)
-    throw std::invalid_argument("the start F must be #T by 9 (one vec(F) per tet), got " +
-                                std::to_string(F0->rows()) + " by " + std::to_string(F0->cols()));
+  const Eigen::Index count = model_.scene_tet_count();
+  if (F0->rows() != count || F0->cols() != 9)
+    throw std::invalid_argument("the start F must be one F per tet of the scene (" + std::to_string(count) +
+                                " by 9, F row-major per row), got " + std::to_string(F0->rows()) + " by " +
+                                std::to_string(F0->cols()));
   if (!F0->allFinite()) throw std::invalid_argument("the start F contains NaN or infinite values");
-  for (int u = 0; u < nu; ++u) F.col(u) = F0->row(layout_.unknown_tets[layout_.unknown_ptr[u]]).transpose();
+  for (int u = 0; u < nu; ++u) {
+    const Eigen::Index row = model_.scene_index(layout_.unknown_tets[layout_.unknown_ptr[u]]);
+    Mat3 M;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) M(i, j) = (*F0)(row, 3 * i + j);
+    F.col(u) = flatten(M);
+  }
   for (int u = layout_.num_soft; u < nu; ++u) F.col(u) = flatten(nearest_rotation(unflatten(F.col(u))));
   return F;
+}
+
+Eigen::MatrixXd EmuSolver::scene_rows(const Mat9X& F) const {
+  Eigen::MatrixXd rows(model_.scene_tet_count(), 9);
+  rows.rowwise() = Eigen::RowVectorXd::Map(Mat3::Identity().eval().data(), 9);  // tets without unknowns
+  for (Eigen::Index t = 0; t < model_.tets.rows(); ++t) {
+    const Mat3 M = unflatten(F.col(layout_.tet_unknown(t)));
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) rows(model_.scene_index(t), 3 * i + j) = M(i, j);
+  }
+  return rows;
 }
 
 void EmuSolver::base_precondition(const Mat9X& F, const Mat9X& in, Mat9X& out) const {
@@ -579,9 +598,7 @@ class EmuSolver::Newton {
     res.set_neutral_modes(neutral_modes());
     s_.fit_into(c_, F_, x_, Fx_);
     res.positions = x_;
-    Mat9X Ft;
-    expand_unknowns(s_.layout_, F_, Ft);
-    res.F = Ft.transpose();
+    res.F = s_.scene_rows(F_);
   }
 
  private:

@@ -43,8 +43,9 @@ class EmuSolver {
   EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options,
             PositionTerm contact = {});
 
-  /// F0  #T by 9 start (vec(F) column-major per row, per tet as in SolveResult::F;
-  ///     a bone's F is read from its first tet; nullptr: identity)
+  /// F0  start: one F per tet of the scene (Model::scene_tet_count() by 9, F
+  ///     row-major per row, as SolveResult::F); a bone's F is read from its
+  ///     first tet, a tet without unknowns ignored; nullptr: identity
   SolveResult solve(const LoadCase& load, const Eigen::MatrixXd* F0 = nullptr);
 
   /// Called with every iterate of the following solves (see SolverOptions::on_iteration); empty: none.
@@ -69,9 +70,10 @@ class EmuSolver {
   /// Schur preconditioner does not pay for is not listed.
   std::vector<std::pair<std::string, double>> structures() const;
   double factor_nnz() const { return acap_->factor().factor_nnz(); }
+  /// The model as this solver stores it (tets along_curve, tet_order.h).
   const Model& model() const { return model_; }
   int num_unknowns() const { return layout_.num_unknowns; }
-  /// The F unknown each tet uses (#T; see UnknownLayout).
+  /// The F unknown each tet of model() uses (#T; see UnknownLayout).
   const Eigen::VectorXi& tet_unknown() const { return layout_.tet_unknown; }
 
  private:
@@ -103,8 +105,11 @@ class EmuSolver {
   /// c's load: the step test's scale for a warm-started solve
   /// (newton_minimize), and at rest the gradient's round-off.
   double cold_gradient_norm(const Context& c) const;
-  /// The start unknowns (9 x #unknowns) from a #T by 9 F0 (nullptr: identity).
+  /// The start unknowns (9 x #unknowns) from F0 in the scene's rows (see solve; nullptr: identity).
   Mat9X start_unknowns(const Eigen::MatrixXd* F0) const;
+  /// F (9 x #unknowns) as one row per tet of the scene (F row-major; identity
+  /// where a tet has no unknown): SolveResult::F.
+  Eigen::MatrixXd scene_rows(const Mat9X& F) const;
   // F: 9 x #unknowns; Fx, Fd: 9 x #T (F_t of the fit).
   double energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
                       const Mat9X* Fd, double s) const;

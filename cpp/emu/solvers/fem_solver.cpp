@@ -11,6 +11,7 @@
 #include "emu/energy/gravity_work.h"
 #include "emu/solvers/elastic_term.h"
 #include "emu/linalg/negative_curvature.h"
+#include "emu/model/tet_order.h"
 #include "emu/linalg/symmetric_product.h"
 #include "emu/solvers/newton/pcg.h"
 #include "emu/solvers/newton/newton_driver.h"
@@ -19,7 +20,7 @@
 namespace emu {
 
 FemSolver::FemSolver(const Model& model, const SolverOptions& options, PositionTerm contact)
-    : model_((model.validate(), model)),
+    : model_(along_curve(model)),
       layout_(model_),
       options_(options),
       contact_(std::move(contact)),

@@ -68,6 +68,7 @@ class FemSolver {
   double setup_seconds() const { return setup_seconds_; }
   /// The structures this solver built and their bytes (see EmuSolver::structures).
   std::vector<std::pair<std::string, double>> structures() const;
+  /// The model as this solver stores it (tets along_curve, tet_order.h).
   const Model& model() const { return model_; }
   double factor_nnz() const { return factor_.factor_nnz(); }
   /// Numeric factorisations of the Newton matrix so far (solves and corrections).

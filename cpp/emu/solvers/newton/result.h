@@ -32,7 +32,7 @@ struct PhaseTimes {
 
 struct SolveResult {
   Eigen::MatrixX3d positions;  // #V by 3
-  Eigen::MatrixXd F;           // #T by 9 deformation-gradient unknowns (EMU), empty for FEM
+  Eigen::MatrixXd F;           // EMU: F per tet of the scene (Model::scene_tet_count() by 9, F row-major per row; identity where a tet has no unknown); FEM: empty
   bool converged = false;
   std::string status;
   int iterations = 0, cg_iterations = 0;
