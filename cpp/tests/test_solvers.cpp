@@ -459,7 +459,7 @@ TEST(acap_single_precision_operator_with_bones_stays_symmetric) {
 }
 
 // The coarse space's rebuild forms a bone's three turns in one pass over the
-// blocks (EmuSolver::bone_turns_into<3>); bone_turn, which the Python tests
+// blocks (BoneTurnFits::turns<3>); bone_turn, which the Python tests
 // check against the fit and the generic Hessian product, takes one turn
 // through the same code (<1>): the two must give the same bits.
 TEST(bone_turns_at_once_match_one_at_a_time) {

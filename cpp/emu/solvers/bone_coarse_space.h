@@ -43,7 +43,7 @@ class BoneCoarseSpace {
   using Product = std::function<void(const Mat9X&, Mat9X&)>;
   /// turns(b, M, Z, HZ): for each of bone b's three tangents M[k], Z[k] (9 x
   /// #unknowns) = bone b turned by M[k] with the soft F_t of the turn's fitted
-  /// positions (other bones 0), and HZ[k] = H Z[k] (EmuSolver::bone_turns_into:
+  /// positions (other bones 0), and HZ[k] = H Z[k] (BoneTurnFits::turns:
   /// from the unit turn's fits, the three in one pass over H's blocks).
   using Turn = std::function<void(int, const std::array<Mat3, 3>&, std::array<Mat9X, 3>&, std::array<Mat9X, 3>&)>;
 

@@ -14,8 +14,10 @@
 #include "emu/linalg/rotation.h"
 #include "emu/solvers/bone_coarse_space.h"
 #include "emu/solvers/bone_rotations.h"
+#include "emu/solvers/bone_turn_fits.h"
 #include "emu/solvers/constant_schur.h"
 #include "emu/solvers/elastic_term.h"
+#include "emu/solvers/fit_jacobian.h"
 #include "emu/solvers/newton/newton_driver.h"
 #include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
@@ -45,12 +47,13 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
                                 "use preconditioner='woodbury'");
   auto t0 = Clock::now();
   acap_ = std::make_unique<AcapOperator>(model_, layout_);
+  jacobian_ = std::make_unique<FitJacobian>(model_, layout_, *acap_);
   factor_seconds_ = seconds_since(t0);
   build_preconditioner();
   tet_energy_.resize(model_.tets.rows());
   if (layout_.num_bones && emu_.bone_coarse_space) {  // setup: counted with the factorisations
     t0 = Clock::now();
-    build_unit_turn_fits();
+    turn_fits_ = std::make_unique<BoneTurnFits>(layout_, *jacobian_);
     factor_seconds_ += seconds_since(t0);
   }
   {  // the gradient's round-off at an exact equilibrium (see rest_gradient_per_alpha_)
@@ -91,22 +94,6 @@ Modes EmuSolver::acap_modes(int ks) const {
   return lowest_modes_of_inverse(acap_->dofs(), solve, ks, acap_->constraint_rank());
 }
 
-void EmuSolver::build_unit_turn_fits() {
-  turn_fits_.resize(layout_.num_bones);
-  Eigen::MatrixX3d dx;
-  Mat9X Fd;
-  for (int b = 0; b < layout_.num_bones; ++b) {
-    UnitTurnFits& f = turn_fits_[b];
-    Mat9X Z = Mat9X::Zero(9, layout_.num_unknowns);
-    Z.col(layout_.num_soft + b) = flatten(Mat3::Identity());
-    fit_linear_into(Z, dx, Fd);
-    f.follow.resize(9, layout_.num_soft);
-    for (int u = 0; u < layout_.num_soft; ++u) f.follow.col(u) = Fd.col(layout_.unknown_tets[u]);
-    Z.leftCols(layout_.num_soft) = f.follow;
-    fit_linear_into(Z, dx, f.fit);
-  }
-}
-
 std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
   std::vector<std::pair<std::string, double>> out;
   out.emplace_back("ACAP factor", 8.0 * acap_->factor().factor_nnz());
@@ -117,8 +104,7 @@ std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
     // Newton step; Z's turns are the unit-turn fits' follow fields, below
     const double vectors = 3.0 * layout_.num_bones + 2.0 * emu_.recycled_directions;
     out.emplace_back("movable bones and their coarse space", vectors * 9.0 * layout_.num_unknowns * 8);
-    out.emplace_back("bones' unit-turn fits",
-                     9.0 * 8 * layout_.num_bones * double(layout_.num_soft + model_.tets.rows()));
+    out.emplace_back("bones' unit-turn fits", turn_fits_->bytes());
   }
   if (!layout_.joints.empty()) out.emplace_back("joints", sizeof(JointPoint) * double(layout_.joints.size()));
   return out;
@@ -152,7 +138,7 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   c.has_gravity = load.gravity.squaredNorm() > 0;
   if (c.has_gravity) {
     // d W(x*(F)) / dF = C^T K_c^-1 S^T f: one constant solve per load.
-    force_fit(f, c.F_gravity);
+    jacobian_->force_fit(f, c.F_gravity);
   }
   return c;
 }
@@ -164,11 +150,7 @@ void EmuSolver::fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, 
   deformation_gradients(layout_, model_.tets, x, Fx);
 }
 
-void EmuSolver::fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const {
-  dx.setZero(model_.rest.rows(), 3);
-  acap_->fit_of_unknowns(D, dx);
-  deformation_gradients(layout_, model_.tets, dx, Fd);
-}
+void EmuSolver::fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const { jacobian_->apply(D, dx, Fd); }
 
 void EmuSolver::project_tangent(const Mat9X& F, Mat9X& v) const {
   bone_rotations::project_tangent(F, layout_.num_soft, v);
@@ -303,54 +285,6 @@ void EmuSolver::hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X
   }
 }
 
-template <int N>
-void EmuSolver::bone_turns_into(const std::vector<Mat9>& A, int b, const std::array<Mat3, N>& M,
-                                std::array<Mat9X, N>& Z, std::array<Mat9X, N>& HZ) const {
-  // The fit is linear in the per-tet targets and each target acts on the
-  // shape-function gradients from the left (K = L (x) I3): targets M T_t fit
-  // to positions X M^T, whose F_t are M F_t(X). So the turn by M is M times the
-  // unit turn, and so is its fit: on a soft unknown u (tet t) Z_k = vec(M_k
-  // Phi_u), H Z_k = A_u Z_k - alpha w V vec(M_k fit_t) (hessian_product_from_fit
-  // with that fit). The N turns share one loop, so each block A_u comes from
-  // memory once; each product is still a 9x9 times one vector (a 9x9 times 9x3
-  // lazy product rounds differently), so N = 1 and N = 3 give the same bits.
-  const UnitTurnFits& f = turn_fits_[b];
-  const auto& wv = acap_->weight_volume();
-  const double alpha = emu_.alpha;
-  const int ns = layout_.num_soft, nu = layout_.num_unknowns;
-  for (int k = 0; k < N; ++k) {
-    Z[k].resize(9, nu);
-    HZ[k].resize(9, nu);
-  }
-#pragma omp parallel for schedule(static)
-  for (int u = 0; u < ns; ++u) {
-    const int t = layout_.unknown_tets[layout_.unknown_ptr[u]];
-    const Eigen::Map<const Mat3> follow(f.follow.col(u).data()), fit(f.fit.col(t).data());
-    for (int k = 0; k < N; ++k) {
-      const Vec9 z = flatten(Mat3(M[k] * follow));
-      Z[k].col(u) = z;
-      HZ[k].col(u) = A[u].lazyProduct(z) - (alpha * wv(t)) * flatten(Mat3(M[k] * fit));
-    }
-  }
-  for (int u = ns; u < nu; ++u) {  // bones: their own turn (b) or none; the fit's pull over their tets
-    for (int k = 0; k < N; ++k) {
-      Z[k].col(u) = u == ns + b ? flatten(M[k]) : Vec9::Zero();
-      Vec9 pull = Vec9::Zero();
-      for (int i = layout_.unknown_ptr[u]; i < layout_.unknown_ptr[u + 1]; ++i) {
-        const int t = layout_.unknown_tets[i];
-        pull += (alpha * wv(t)) * flatten(Mat3(M[k] * unflatten(f.fit.col(t))));
-      }
-      HZ[k].col(u) = A[u].lazyProduct(Z[k].col(u)) - pull;
-    }
-  }
-}
-
-// The coarse space's rebuild (N = 3) and EmuSolverTesting's single turn (N = 1).
-template void EmuSolver::bone_turns_into<1>(const std::vector<Mat9>&, int, const std::array<Mat3, 1>&,
-                                            std::array<Mat9X, 1>&, std::array<Mat9X, 1>&) const;
-template void EmuSolver::bone_turns_into<3>(const std::vector<Mat9>&, int, const std::array<Mat3, 3>&,
-                                            std::array<Mat9X, 3>&, std::array<Mat9X, 3>&) const;
-
 Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
   if (rows.rows() != layout_.num_unknowns || rows.cols() != 9)
     throw std::invalid_argument("expected a #unknowns by 9 array (one vec(F) per soft tet, then per bone; " +
@@ -360,46 +294,13 @@ Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
   return rows.transpose();
 }
 
-void EmuSolver::force_fit(const Eigen::MatrixX3d& f, Mat9X& out) const {
-  Eigen::MatrixX3d R;
-  acap_->reduce_vertex(f, R);
-  Eigen::MatrixXd Z;
-  acap_->solve(Eigen::MatrixXd(R), Z);
-  Eigen::MatrixX3d y = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
-  acap_->expand(Eigen::MatrixX3d(Z), y);
-  deformation_gradients(layout_, model_.tets, y, out);
-}
-
-void EmuSolver::position_force_to_unknowns(const Eigen::MatrixX3d& f, Mat9X& out) const {
-  Mat9X per_tet;
-  force_fit(f, per_tet);
-  const auto& wv = acap_->weight_volume();
-  for (Eigen::Index t = 0; t < per_tet.cols(); ++t) per_tet.col(t) *= wv(t);
-  reduce_to_unknowns(layout_, per_tet, out);
-}
-
 void EmuSolver::add_contact_gradient(const Eigen::MatrixX3d& x, Mat9X& g) const {
   if (!has_contact()) return;
   const Eigen::MatrixX3d gx = contact_.checked_gradient(x);
   if (gx.isZero(0.0)) return;
   Mat9X gF;
-  position_force_to_unknowns(gx, gF);
+  jacobian_->transpose_apply(gx, gF);
   g += gF;
-}
-
-void EmuSolver::add_position_hessian_product(const Eigen::SparseMatrix<double>& H, const Mat9X& v, Mat9X& out) const {
-  if (H.nonZeros() == 0) return;
-  Eigen::MatrixX3d dx;
-  Mat9X Fd;
-  fit_linear_into(v, dx, Fd);
-  // H acts on vertex-major dofs 3 w + i: the rows of dx, flattened row by row.
-  const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> dxr = dx;
-  const Eigen::VectorXd Hdx = H * Eigen::Map<const Eigen::VectorXd>(dxr.data(), dxr.size());
-  const Eigen::MatrixX3d f = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
-      Hdx.data(), dx.rows(), 3);
-  Mat9X add;
-  position_force_to_unknowns(f, add);
-  out += add;
 }
 
 double EmuSolver::load_work(const Context& c, const Eigen::MatrixX3d& x) const {
@@ -480,7 +381,11 @@ void EmuSolver::base_precondition(const Mat9X& F, const Mat9X& in, Mat9X& out) c
 class EmuSolver::Newton {
  public:
   Newton(EmuSolver& s, const Context& c, Mat9X F)
-      : s_(s), c_(c), bones_(s.layout_.num_bones > 0), F_(std::move(F)), coarse_(s.layout_, s.emu_.alpha, s.follow_fields()) {
+      : s_(s),
+        c_(c),
+        bones_(s.layout_.num_bones > 0),
+        F_(std::move(F)),
+        coarse_(s.layout_, s.emu_.alpha, s.turn_fits_ ? s.turn_fits_->follow_fields() : std::vector<const Mat9X*>()) {
     s_.fit_into(c_, F_, x_, Fx_);
     E_ = s_.energy_along(c_, F_, Fx_, nullptr, nullptr, 0.0) - s_.load_work(c_, x_) + s_.contact_energy(x_);
     if (s_.has_contact()) s_.contact_.check_start_state(x_, E_);
@@ -645,7 +550,7 @@ class EmuSolver::Newton {
     else s_.hessian_product_into(H, v, out);
     if (s_.has_contact() && Hc_.nonZeros()) {
       Mat9X add = Mat9X::Zero(9, out.cols());
-      s_.add_position_hessian_product(Hc_, v, add);
+      s_.jacobian_->add_hessian_product(Hc_, v, add);
       if (bones_) s_.project_tangent(F_, add);
       out += add;
     }
@@ -656,7 +561,8 @@ class EmuSolver::Newton {
     coarse_.build(
         F_,
         [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
-          s_.bone_turns_into<3>(H, b, M, Z, HZ);  // the three turns in one pass over H's blocks
+          // the three turns in one pass over H's blocks
+          s_.turn_fits_->turns<3>(H, b, M, s_.emu_.alpha, s_.acap_->weight_volume(), Z, HZ);
           for (int k = 0; k < 3; ++k) {
             if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
             else

@@ -32,6 +32,8 @@
 #include "emu/model/unknown_layout.h"
 #include "emu/solvers/acap.h"
 #include "emu/solvers/block_preconditioner.h"
+#include "emu/solvers/bone_turn_fits.h"
+#include "emu/solvers/fit_jacobian.h"
 #include "emu/solvers/newton/result.h"
 #include "emu/solvers/solver_options.h"
 
@@ -92,8 +94,6 @@ class EmuSolver {
   void build_preconditioner();
   /// The ks lowest scalar modes of the ACAP operator K (with movable bones, of K_c^-1 by its solves).
   Modes acap_modes(int ks) const;
-  /// Setup of the bone coarse space: turn_fits_.
-  void build_unit_turn_fits();
   Context make_context(const LoadCase& load) const;
   /// The round-off level of the gradient norm (see Convergence).
   double gradient_floor(const Context& c) const;
@@ -118,9 +118,6 @@ class EmuSolver {
   void hessian_product_into(const std::vector<Mat9>& A, const Mat9X& v, Mat9X& out) const;
   /// The same with v's fit given: Fd (9 x #T) = F_t(x*(v)).
   void hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, const Mat9X& Fd, Mat9X& out) const;
-  template <int N>
-  void bone_turns_into(const std::vector<Mat9>& A, int b, const std::array<Mat3, N>& M, std::array<Mat9X, N>& Z,
-                       std::array<Mat9X, N>& HZ) const;
   void fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const;
   void fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const;
   // Bones on SO(3) (bone_rotations.h): tangent projection of v's bone columns
@@ -130,20 +127,11 @@ class EmuSolver {
   void riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                           bool curvature, Mat9X& out) const;
   Mat9X to_cols(const Eigen::MatrixXd& rows) const;
-  // Contact on the fitted positions x = x*(F):
-  //   E_c(x*(F)),  dE_c/dF = C^T K_c^-1 S^T g_x  (one back-substitution),
-  //   Hessian J^T H_c J with J = dx*/dF = S K_c^-1 C (two per product).
+  // Contact on the fitted positions x = x*(F) (its chain rule: fit_jacobian.h).
   bool has_contact() const { return contact_.active(); }
   double contact_energy(const Eigen::MatrixX3d& x) const { return has_contact() ? contact_.energy(x) : 0.0; }
-  /// out (9 x #T) = F_t(S K_c^-1 S^T f) for vertex forces f (#V by 3): the fit of
-  /// the forces (one back-substitution); w_t V_t times it is C^T K_c^-1 S^T f.
-  void force_fit(const Eigen::MatrixX3d& f, Mat9X& out) const;
-  /// out (9 x #unknowns) = J^T f for vertex forces f (#V by 3): C^T K_c^-1 S^T f per tet, summed per unknown.
-  void position_force_to_unknowns(const Eigen::MatrixX3d& f, Mat9X& out) const;
   /// g += dE_c/dF at the fit x.
   void add_contact_gradient(const Eigen::MatrixX3d& x, Mat9X& g) const;
-  /// out += J^T H J v (H: 3 #V by 3 #V, the contact Hessian at the iterate).
-  void add_position_hessian_product(const Eigen::SparseMatrix<double>& H, const Mat9X& v, Mat9X& out) const;
 
   Model model_;
   UnknownLayout layout_;
@@ -151,6 +139,7 @@ class EmuSolver {
   EmuOptions emu_;
   PositionTerm contact_;
   std::unique_ptr<AcapOperator> acap_;
+  std::unique_ptr<FitJacobian> jacobian_;  // the chain rule through acap_'s fit
   std::unique_ptr<BlockPreconditioner> preconditioner_;  // EmuOptions::preconditioner's (block_preconditioner.h)
   int modes_ = 0;
   double factor_seconds_ = 0, modes_seconds_ = 0;
@@ -161,22 +150,7 @@ class EmuSolver {
   // three times farther from FEM: tests/test_error_estimate.py).
   double rest_gradient_per_alpha_ = 0;
   mutable std::vector<double> tet_energy_;
-  // Movable bones with the coarse space: the fit is linear and acts per
-  // coordinate (K = L (x) I3), so the fit of a bone turned by M with the soft
-  // F_t following is M times that of the unit turn M = I: per bone, F_t of the
-  // unit turn's fit on the soft unknowns (follow, 9 x #soft) and F_t of the fit
-  // of that followed field (fit, 9 x #T), two fits once at setup in place of
-  // six per Newton step (bone_turns_into).
-  struct UnitTurnFits {
-    Mat9X follow, fit;
-  };
-  std::vector<UnitTurnFits> turn_fits_;
-  /// Per movable bone its unit turn's follow field (empty without the coarse space).
-  std::vector<const Mat9X*> follow_fields() const {
-    std::vector<const Mat9X*> f;
-    for (const UnitTurnFits& t : turn_fits_) f.push_back(&t.follow);
-    return f;
-  }
+  std::unique_ptr<BoneTurnFits> turn_fits_;  // movable bones with the coarse space, else empty
 };
 
 }  // namespace emu

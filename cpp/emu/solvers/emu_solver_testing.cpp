@@ -50,7 +50,7 @@ Eigen::MatrixXd EmuSolverTesting::hessian_product(const EmuSolver& s, const Load
     Eigen::MatrixX3d x;
     Mat9X Fx;
     s.fit_into(c, F, x, Fx);
-    s.add_position_hessian_product(s.contact_.checked_hessian(x), V, out);
+    s.jacobian_->add_hessian_product(s.contact_.checked_hessian(x), V, out);
   }
   return out.transpose();
 }
@@ -120,14 +120,15 @@ std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, N> EmuSolverTesting::tur
                                                                                       int bone,
                                                                                       const std::array<Mat3, N>& M,
                                                                                       bool exact) {
-  if (bone < 0 || bone >= static_cast<int>(s.turn_fits_.size()))
+  const int bones = s.turn_fits_ ? s.turn_fits_->bones() : 0;
+  if (bone < 0 || bone >= bones)
     throw std::invalid_argument("bone_turn: bone " + std::to_string(bone) + " is not a movable bone of a solver " +
-                                "with the bone coarse space (" + std::to_string(s.turn_fits_.size()) + " such bones)");
+                                "with the bone coarse space (" + std::to_string(bones) + " such bones)");
   const EmuSolver::Context c = s.make_context(load);
   std::vector<Mat9> A, A_exact;
   s.blocks_into(c, s.to_cols(Frows), &A, &A_exact);
   std::array<Mat9X, N> Z, HZ;  // the coarse space's path
-  s.template bone_turns_into<N>(exact ? A_exact : A, bone, M, Z, HZ);
+  s.turn_fits_->turns<N>(exact ? A_exact : A, bone, M, s.emu_.alpha, s.acap_->weight_volume(), Z, HZ);
   std::array<std::pair<Eigen::MatrixXd, Eigen::MatrixXd>, N> out;
   for (int k = 0; k < N; ++k) out[k] = {Z[k].transpose(), HZ[k].transpose()};
   return out;
