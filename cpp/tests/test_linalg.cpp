@@ -138,28 +138,40 @@ static void grid_laplacian_3d(int g, double shift, std::vector<int>& p, std::vec
   upper_csc(dense, p, i, x);
 }
 
+// A grid Laplacian's supernodal factor f, the same matrix's simplicial factor
+// and its dense Cholesky: the supernodal solve's tests' common ground.
+struct GridFactor {
+  std::vector<int> p, i;
+  std::vector<double> x;
+  Eigen::MatrixXd K;
+  int n = 0;
+  CholmodFactor f, simple;
+  Eigen::LLT<Eigen::MatrixXd> dense;
+  GridFactor() {
+    grid_laplacian_3d(11, 1e-3, p, i, x, K);
+    n = static_cast<int>(K.rows());
+    f.analyze(n, p.data(), i.data());
+    CHECK(f.factorize(x.data()) && !f.simplicial());
+    simple.analyze_like(f);
+    CHECK(simple.factorize(x.data()));
+    simple.make_simplicial();
+    CHECK(simple.simplicial());
+    dense.compute(K);
+  }
+};
+
 TEST(supernodal_solve_of_few_right_hand_sides_matches_dense_and_cholmod) {
   // CholmodFactor::solve takes supernodal_solve_in_place for 2-4 right-hand
   // sides of a supernodal factor (1 and 5 CHOLMOD's solve): each count must
   // give the dense solution (b and x aliased too) and agree with CHOLMOD's
   // own solve (the simplicial factor's, which supernodal_solve_in_place does
   // not handle)
-  std::vector<int> p, i;
-  std::vector<double> x;
-  Eigen::MatrixXd K;
-  grid_laplacian_3d(11, 1e-3, p, i, x, K);
-  const int n = static_cast<int>(K.rows());
-  CholmodFactor f, simple;
-  f.analyze(n, p.data(), i.data());
-  CHECK(f.factorize(x.data()) && !f.simplicial());
-  simple.analyze_like(f);
-  CHECK(simple.factorize(x.data()));
-  simple.make_simplicial();
-  CHECK(simple.simplicial());
-  const Eigen::LLT<Eigen::MatrixXd> dense(K);
+  GridFactor g;
+  CholmodFactor &f = g.f, &simple = g.simple;
+  const int n = g.n;
   for (int nrhs = 1; nrhs <= 5; ++nrhs) {
     const Eigen::MatrixXd b = Eigen::MatrixXd::Random(n, nrhs);
-    const Eigen::MatrixXd ref = dense.solve(b);
+    const Eigen::MatrixXd ref = g.dense.solve(b);
     Eigen::MatrixXd sol(n, nrhs), by_cholmod(n, nrhs);
     f.solve(b.data(), sol.data(), nrhs);
     CHECK((sol - ref).norm() <= 1e-10 * ref.norm());
@@ -172,19 +184,17 @@ TEST(supernodal_solve_of_few_right_hand_sides_matches_dense_and_cholmod) {
   {  // the factor's single-precision copy, through CholmodFactor::solve
     f.keep_single_precision_copy();
     const Eigen::MatrixXd b = Eigen::MatrixXd::Random(n, 3);
-    const Eigen::MatrixXd ref = dense.solve(b);
+    const Eigen::MatrixXd ref = g.dense.solve(b);
     Eigen::MatrixXd sol(n, 3), full(n, 3);
     f.solve(b.data(), sol.data(), 3, true);
     f.solve(b.data(), full.data(), 3);
     CHECK((sol - ref).norm() <= 1e-3 * ref.norm() && (sol - full).norm() > 0.0);
     CHECK((full - ref).norm() <= 1e-10 * ref.norm());
     // a refactorisation refreshes the copy (values doubled: half the solution)
-    for (double& v : x) v *= 2.0;
-    CHECK(f.factorize(x.data()));
+    for (double& v : g.x) v *= 2.0;
+    CHECK(f.factorize(g.x.data()));
     f.solve(b.data(), sol.data(), 3, true);
     CHECK((sol - 0.5 * ref).norm() <= 1e-3 * ref.norm());
-    for (double& v : x) v *= 0.5;
-    CHECK(f.factorize(x.data()));
     // a simplicial factor cannot keep one
     bool refused = false;
     try {
@@ -194,15 +204,58 @@ TEST(supernodal_solve_of_few_right_hand_sides_matches_dense_and_cholmod) {
     }
     CHECK(refused);
   }
+  // a negative-definite matrix is still reported, and the kernel refuses a simplicial factor
+  for (double& v : g.x) v = -v;
+  CHECK(!f.factorize(g.x.data()));
+  bool refused = false;
+  try {
+    supernodal_panels(*simple.factor());
+  } catch (const std::logic_error&) {
+    refused = true;
+  }
+  CHECK(refused);
+}
+
+TEST(supernodal_schedule_gives_the_same_bits_on_one_and_two_threads) {
+  // the schedule splits the tree (tasks and a top); its result has the same
+  // bits on 1 and 2 threads and agrees with one serial task to round-off
+  GridFactor g;
+  const int n = g.n;
+  const SupernodalPanels<double> panels = supernodal_panels(*g.f.factor());
+  // tasks of at least 1,000 entries (the default's 131,072 leaves this small factor one serial task)
+  const SupernodalSchedule order = supernodal_schedule(panels, 16, 1000);
+  CHECK(supernodal_schedule(panels).task_first.size() == 1 && supernodal_schedule(panels).top.empty());
+  CHECK(order.task_first.size() >= 4 && !order.top.empty() && order.top_columns > 0);
+  SupernodalSchedule serial;
+  serial.task_first = {0};
+  serial.task_last = {panels.nsuper - 1};
+  serial.top_slot.assign(n, -1);
+  serial.longest = order.longest;
+  std::vector<double> scratch;
+  Eigen::MatrixXd one = Eigen::MatrixXd::Zero(4, n), two, alone;
+  one.topRows(3) = Eigen::MatrixXd::Random(3, n);
+  two = alone = one;
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  supernodal_solve_in_place<4>(panels, order, one.data(), scratch);
+  omp_set_num_threads(2);
+  supernodal_solve_in_place<4>(panels, order, two.data(), scratch);
+  supernodal_solve_in_place<4>(panels, serial, alone.data(), scratch);
+  omp_set_num_threads(threads);
+  CHECK((one - two).norm() == 0.0);
+  CHECK((one - alone).norm() <= 1e-12 * one.norm());
+}
+
+TEST(supernodal_kernel_solves_each_lane_in_double_and_rounded) {
   // the kernel alone, each build this CPU runs, on a zero-padded fourth lane:
   // the padding stays zero and the lanes solve independently; with the
   // factor rounded to float, the exact solution of the rounded factor (a
   // dense solve with L~ L~^T) and within float round-off of the true one
-  const cholmod_factor* L = f.factor();
+  GridFactor g;
+  const int n = g.n;
+  const cholmod_factor* L = g.f.factor();
   const SupernodalPanels<double> panels = supernodal_panels(*L);
-  // tasks of at least 1,000 entries (the default's 131,072 leaves this small factor one serial task)
   const SupernodalSchedule order = supernodal_schedule(panels, 16, 1000);
-  CHECK(supernodal_schedule(panels).task_first.size() == 1 && supernodal_schedule(panels).top.empty());
   std::vector<float> rounded(static_cast<const double*>(L->x), static_cast<const double*>(L->x) + L->xsize);
   const SupernodalPanels<float> rounded_panels = with_values(panels, rounded.data());
   Eigen::MatrixXd Lr = Eigen::MatrixXd::Zero(n, n);  // the rounded factor, dense, in L's (permuted) order
@@ -216,32 +269,9 @@ TEST(supernodal_solve_of_few_right_hand_sides_matches_dense_and_cholmod) {
   const Eigen::MatrixXd b = Eigen::MatrixXd::Random(n, 3);
   Eigen::MatrixXd bp(n, 3);  // P b
   for (int k = 0; k < n; ++k) bp.row(k) = b.row(perm[k]);
-  const Eigen::MatrixXd ref = dense.solve(b);
+  const Eigen::MatrixXd ref = g.dense.solve(b);
   const Eigen::MatrixXd ref_rounded =
       Lr.transpose().triangularView<Eigen::Upper>().solve(Lr.triangularView<Eigen::Lower>().solve(bp));
-  // the schedule splits the tree (tasks and a top); its result has the same
-  // bits on 1 and 2 threads and agrees with one serial task to round-off
-  CHECK(order.task_first.size() >= 4 && !order.top.empty() && order.top_columns > 0);
-  {
-    SupernodalSchedule serial;
-    serial.task_first = {0};
-    serial.task_last = {panels.nsuper - 1};
-    serial.top_slot.assign(n, -1);
-    serial.longest = order.longest;
-    std::vector<double> scratch;
-    Eigen::MatrixXd one = Eigen::MatrixXd::Zero(4, n), two, alone;
-    one.topRows(3) = bp.transpose();
-    two = alone = one;
-    const int threads = omp_get_max_threads();
-    omp_set_num_threads(1);
-    supernodal_solve_in_place<4>(panels, order, one.data(), scratch);
-    omp_set_num_threads(2);
-    supernodal_solve_in_place<4>(panels, order, two.data(), scratch);
-    supernodal_solve_in_place<4>(panels, serial, alone.data(), scratch);
-    omp_set_num_threads(threads);
-    CHECK((one - two).norm() == 0.0);
-    CHECK((one - alone).norm() <= 1e-12 * one.norm());
-  }
   std::vector<SupernodalIsa> isas = {SupernodalIsa::baseline};
   if (supernodal_solve_has_avx2()) isas.push_back(SupernodalIsa::avx2);
   std::vector<double> scratch;
@@ -266,16 +296,6 @@ TEST(supernodal_solve_of_few_right_hand_sides_matches_dense_and_cholmod) {
         CHECK((r.col(k).transpose() - ref.row(perm[k]).head(lanes)).norm() <= 1e-10 * ref.norm());
     }
   }
-  // a negative-definite matrix is still reported, and the kernel refuses a simplicial factor
-  for (double& v : x) v = -v;
-  CHECK(!f.factorize(x.data()));
-  bool refused = false;
-  try {
-    supernodal_panels(*simple.factor());
-  } catch (const std::logic_error&) {
-    refused = true;
-  }
-  CHECK(refused);
 }
 
 TEST(symmetric_upper_product_matches_dense) {

@@ -102,7 +102,6 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
 }
 
 void AcapOperator::setup_bones(const AcapOperator* same_model) {
-  const Eigen::Index m = model_.tets.rows();
   const auto& vb = layout_.vertex_bone;
   Eigen::Matrix<double, 4, Eigen::Dynamic> phi(4, vb.size());  // of each bone vertex
   for (Eigen::Index v = 0; v < vb.size(); ++v)
@@ -118,30 +117,42 @@ void AcapOperator::setup_bones(const AcapOperator* same_model) {
     bone_corner_bone_ = same_model->bone_corner_bone_;
     bone_corner_phi_ = same_model->bone_corner_phi_;
   } else {
-    is_rigid_.assign(m, 0);
-    for (Eigen::Index t = 0; t < m; ++t) {
-      bool touches = false;
-      for (int a = 0; a < 4; ++a) touches |= vb(model_.tets(t, a)) >= 0;
-      if (touches) bone_tets_.push_back(static_cast<int>(t));
-      const int b = vb(model_.tets(t, 0));
-      bool rigid = b >= 0;
-      for (int a = 1; a < 4; ++a) rigid = rigid && vb(model_.tets(t, a)) == b;
-      if (!rigid) continue;
-      is_rigid_[t] = 1;
-      rigid_tets_.push_back(static_cast<int>(t));
-      rigid_tet_bone_.push_back(b);
-    }
-    for (Eigen::Index t = 0; t < m; ++t)
-      for (int a = 0; a < 4; ++a) {
-        const int v = model_.tets(t, a);
-        if (vb(v) < 0 || is_rigid_[t]) continue;
-        bone_corner_.push_back(static_cast<int>(t * 4 + a));
-        bone_corner_bone_.push_back(vb(v));
-      }
-    bone_corner_phi_.resize(4, bone_corner_.size());
-    for (size_t i = 0; i < bone_corner_.size(); ++i)
-      bone_corner_phi_.col(i) = phi.col(model_.tets(bone_corner_[i] / 4, bone_corner_[i] % 4));
+    classify_bone_tets(phi);
   }
+  sum_rigid_tets();
+  eliminate_soft_block(phi);
+  setup_joint_rows();
+}
+
+void AcapOperator::classify_bone_tets(const Eigen::Matrix<double, 4, Eigen::Dynamic>& phi) {
+  const Eigen::Index m = model_.tets.rows();
+  const auto& vb = layout_.vertex_bone;
+  is_rigid_.assign(m, 0);
+  for (Eigen::Index t = 0; t < m; ++t) {
+    bool touches = false;
+    for (int a = 0; a < 4; ++a) touches |= vb(model_.tets(t, a)) >= 0;
+    if (touches) bone_tets_.push_back(static_cast<int>(t));
+    const int b = vb(model_.tets(t, 0));
+    bool rigid = b >= 0;
+    for (int a = 1; a < 4; ++a) rigid = rigid && vb(model_.tets(t, a)) == b;
+    if (!rigid) continue;
+    is_rigid_[t] = 1;
+    rigid_tets_.push_back(static_cast<int>(t));
+    rigid_tet_bone_.push_back(b);
+  }
+  for (Eigen::Index t = 0; t < m; ++t)
+    for (int a = 0; a < 4; ++a) {
+      const int v = model_.tets(t, a);
+      if (vb(v) < 0 || is_rigid_[t]) continue;
+      bone_corner_.push_back(static_cast<int>(t * 4 + a));
+      bone_corner_bone_.push_back(vb(v));
+    }
+  bone_corner_phi_.resize(4, bone_corner_.size());
+  for (size_t i = 0; i < bone_corner_.size(); ++i)
+    bone_corner_phi_.col(i) = phi.col(model_.tets(bone_corner_[i] / 4, bone_corner_[i] % 4));
+}
+
+void AcapOperator::sum_rigid_tets() {
   rigid_own_wv_ = Eigen::VectorXd::Zero(layout_.num_bones);
   rigid_own_tets_.assign(layout_.num_bones, -1);
   rigid_other_tets_.clear();
@@ -156,10 +167,14 @@ void AcapOperator::setup_bones(const AcapOperator* same_model) {
       rigid_other_bone_.push_back(b);
     }
   }
+}
+
+void AcapOperator::eliminate_soft_block(const Eigen::Matrix<double, 4, Eigen::Dynamic>& phi) {
   // Coupling L_sb and bone block L_bb from the element matrices w V b_a . b_c
   // of the tets touching a bone, each vertex's phi once; L_sb summed in rows
   // (a free vertex's four entries per bone side by side), then stored by
   // columns for the solve (the same sums in the same order).
+  const auto& vb = layout_.vertex_bone;
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Lsb_rows =
       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>::Zero(ns_, nq_);
   Eigen::MatrixXd Lbb = Eigen::MatrixXd::Zero(nq_, nq_);
@@ -185,7 +200,9 @@ void AcapOperator::setup_bones(const AcapOperator* same_model) {
   factor_.solve(Lsb.data(), W_.data(), nq_, rounded_);
   Sb_ = Lbb - Lsb.transpose() * W_;
   Sb_ = 0.5 * (Sb_ + Sb_.transpose()).eval();
-  // Joint rows.
+}
+
+void AcapOperator::setup_joint_rows() {
   const int nj = static_cast<int>(layout_.joints.size());
   J_ = Eigen::MatrixXd::Zero(nj, nq_);
   for (int r = 0; r < nj; ++r) {

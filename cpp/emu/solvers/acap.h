@@ -114,6 +114,14 @@ class AcapOperator {
   /// same_model: an operator of the same model whose weight-independent bone
   /// data (rigid tets, bone corners) are copied (nullptr: computed).
   void setup_bones(const AcapOperator* same_model);
+  // setup_bones' steps, with phi (4 x #V) of every bone vertex: which tets
+  // touch a bone or are rigid and the bone corners (model data alone); the
+  // rigid tets' weights per bone; L_sb, L_bb, W = L_ss^-1 L_sb and S_b; the
+  // joint rows J, their null space and the reduced bone system.
+  void classify_bone_tets(const Eigen::Matrix<double, 4, Eigen::Dynamic>& phi);
+  void sum_rigid_tets();
+  void eliminate_soft_block(const Eigen::Matrix<double, 4, Eigen::Dynamic>& phi);
+  void setup_joint_rows();
   /// apply_C with D_t = target(t): a Mat3 or a Map of 9 doubles in column
   /// order, never a lazy expression (it is held with auto per tet).
   /// by_unknowns: target(t) is the unknown of tet t (apply_C_of_unknowns),
