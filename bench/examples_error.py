@@ -12,10 +12,10 @@ instead of the scene's (Solver(step_fraction=F)).
 """
 from __future__ import annotations
 
+import argparse
 import glob
 import os
 import subprocess
-import sys
 import time
 import warnings
 
@@ -132,17 +132,14 @@ def write_page(results, docs_dir, header: str) -> str:
 
 
 def main(argv=None):
-    args = list(argv if argv is not None else sys.argv[1:])
-    extra, docs = {}, None
-    if "--emu-step-fraction" in args:
-        i = args.index("--emu-step-fraction")
-        extra["step_fraction"] = float(args[i + 1])
-        del args[i:i + 2]
-    if "--docs" in args:
-        i = args.index("--docs")
-        docs = args[i + 1]
-        del args[i:i + 2]
-    paths = args or sorted(glob.glob(os.path.join(HERE, "..", "examples", "*.toml")))
+    parser = argparse.ArgumentParser(description="every example's frames: EMU as shipped against strict FEM")
+    parser.add_argument("paths", nargs="*", help="scene files (default: every examples/*.toml)")
+    parser.add_argument("--docs", metavar="DIR", help="write DIR/examples.md (pictures, per-frame tables)")
+    parser.add_argument("--emu-step-fraction", type=float, help="EMU's step_fraction option")
+    a = parser.parse_args(argv)
+    extra = {} if a.emu_step_fraction is None else {"step_fraction": a.emu_step_fraction}
+    docs = a.docs
+    paths = a.paths or sorted(glob.glob(os.path.join(HERE, "..", "examples", "*.toml")))
     warnings.simplefilter("ignore")
     i = emu.info()
     try:

@@ -42,22 +42,22 @@ class AccuracyWarning(UserWarning):
     for after every alpha tried (see Solution.accuracy_reached)."""
 
 
-# Accept a solve whose error estimate is within ACCEPT x the target (the
-# estimate was measured at 0.65-1.35 x the true error), aim new alphas at AIM
+# Accept a solve whose error estimate is within ACCEPT x the target (a margin
+# for the estimate's own error: docs/DESIGN.md, "EMU's error estimate"), aim new alphas at AIM
 # x the target; stop iterating when a full step moves no vertex by more than
 # STEP_FRACTION x the target; at most MAX_ALPHA_ATTEMPTS solves per call.
 ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS = 0.6, 0.4, 0.1, 5
 # A re-solve warm-started from EMU's own F at a larger alpha runs CG to this
-# forcing term, so that the step test sees Newton steps (at 0.5 one CG
-# iteration there passed the test while missing a bone's turn). A re-solve
+# forcing term, so that the step test sees Newton steps (with a loose one a
+# single CG iteration can pass the test while missing a bone's turn). A re-solve
 # from x1 (FEM's correction: the bones already turned) needs no such cap.
 ACCURACY_CG_FORCING = 0.01
 # FEM-corrected answers: the corrections x2 of x1 and x3 of x2 contract,
 # |x2 - x1| <= CORRECTION_CONTRACTION |x1 - x| (and within ACCEPT x target)
 # and |x3 - x2| <= CORRECTION_CONTRACTION |x2 - x1|; or, within
 # MAX_CORRECTIONS corrections, one moves no vertex by more than STEP_FRACTION
-# x target (FEM's own accuracy stop; fusiform_80k: steps 6.3e-4, 1.0e-3,
-# 1.5e-4 from x1, which never contract twice in a row).
+# x target (FEM's own accuracy stop, for corrections that do not contract
+# twice in a row).
 CORRECTION_CONTRACTION, MAX_CORRECTIONS = 0.3, 4
 # EMU without alpha or accuracy: accuracy = DEFAULT_ACCURACY, starting at DEFAULT_ALPHA.
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
@@ -74,10 +74,10 @@ RESOLVE_GAIN, ALPHA_MAX_RATIO = 0.9, 1e4
 # The next solve's alpha is lowered (at most by half, towards AIM x target)
 # where the estimate is below AIM x target, but not below ALPHA_MIN: where
 # geometry, not alpha, sets the error (a bone's turn) the estimate stays low
-# whatever alpha, which halved alpha every frame down to 0.1 mu and slowed
-# every solve (docs/DESIGN.md, "Accuracy as the knob").
+# whatever alpha, and halving alpha every frame would drive it far down and
+# slow every solve (docs/DESIGN.md, "Accuracy as the knob").
 ALPHA_MIN = 10.0
-# error ~ alpha^-P_RAISE when raising (p from 0.3 to 1 measured: 0.75 makes a
+# error ~ alpha^-P_RAISE when raising (p varies by scene; 0.75 makes a
 # second raise rare), ~ alpha^-1 when lowering; a raise is by a factor in
 # [RAISE_MIN, RAISE_MAX].
 P_RAISE, RAISE_MIN, RAISE_MAX = 0.75, 1.5, 30.0
@@ -190,7 +190,7 @@ class AccuracyMode:
         - or a correction moves no vertex by more than STEP_FRACTION x target
           (FEM's accuracy-mode stop): that correction's result, with its last two
           steps' lengths summed as its estimate (a bound: the steps need not
-          shrink at once, measured 1-4x the true error).
+          shrink at once).
         Then the solution's positions are the corrected answer and (True, None)
         is returned. Otherwise the solution is left as it was and (False, |x -
         x3|) is returned where x1 overshot but x3 contracts (a closer FEM point

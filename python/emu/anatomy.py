@@ -41,7 +41,7 @@ from .shapes import capsule, spindle
 
 __all__ = ["arm", "leg", "neck", "upper_limb", "cache_dir", "ANATOMY_TETS", "SHOULDER_STIFFNESS"]
 
-# Tets per resolution^2 (fTetWild's count for a target is within about 30%).
+# Tets per resolution^2 (fTetWild's count only approximates the target).
 ANATOMY_TETS = 700
 # upper_limb: the shoulder's passive stiffness (N m / rad)
 SHOULDER_STIFFNESS = 0.05

@@ -61,7 +61,7 @@ _MESH_ORDER = {"muscle": 0, "tendon": 1, "bone": 2}
 # Two bones closer than JOINT_GAP tet edges (and not touching) get a detected ball joint.
 JOINT_GAP = 3.0
 # fTetWild's tets per volume for an ideal edge length e, with its coarsening on:
-# about V / (TETS_PER_EDGE_CUBE e^3) tets (measured on capsules and spindles: 0.03-0.05).
+# about V / (TETS_PER_EDGE_CUBE e^3) tets (the coefficient varies a little with the shapes).
 TETS_PER_EDGE_CUBE = 0.04
 # Soft parts overlapping each other: a sample of OVERLAP_SAMPLE tets of the part
 # that took the overlap, reported when more than OVERLAP_REPORTED of it lies

@@ -270,7 +270,7 @@ def check_movable_bones(points: np.ndarray, bones: dict, held: np.ndarray):
     is_held[np.asarray(held, np.int64)] = True
     for name, verts in bones.items():
         verts = np.asarray(verts, np.int64)
-        on = np.unique(verts[is_held[verts]])   # the bone's held vertices, sorted (as intersect1d gave)
+        on = np.unique(verts[is_held[verts]])   # the bone's held vertices, sorted (as np.intersect1d gives)
         if len(on) < 3:
             continue
         X = points[on] - points[on[0]]

@@ -147,8 +147,8 @@ class ContactTerm:
             self.mesh.can_collide = ipctk.CollisionFilter(lambda i, j: bool(allowed[vp[i], vp[j]]))
             self._python_filter = True
             # for the rest of the process, not per call: set back to more threads
-            # between calls, a worker still awake from the last parallel call took
-            # a filter task and waited for the GIL forever (docs/DESIGN.md, "Contact")
+            # between calls, a worker still awake from the last parallel call can take
+            # a filter task and wait for the GIL forever (docs/DESIGN.md, "Contact")
             ipctk.set_num_threads(1)
         else:
             # pairs may touch exactly when their patches differ: ipctk's own filter

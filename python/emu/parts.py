@@ -8,8 +8,8 @@ import numpy as np
 __all__ = ["Part", "lame", "default_tendon_weight", "BONE_ACAP_WEIGHT"]
 
 # ACAP weight of movable bones' tets: the fitted bone positions follow the
-# bone's rotation to about 1/weight of the soft tissue's pull (measured in
-# docs/DESIGN.md); large weights only touch the small dense bone block.
+# bone's rotation to about 1/weight of the soft tissue's pull (docs/DESIGN.md,
+# "Bones and joints"); large weights only touch the small dense bone block.
 BONE_ACAP_WEIGHT = 1e4
 
 

@@ -36,10 +36,10 @@ STEPS = CHOICES["step"]
 # by more than POSITION_TOL x the bounding-box diagonal, once |g| <=
 # POSITION_TOL_GRAD |g_0|: with bones the gradient's round-off (the fit's
 # conditioning) can sit within a few times rtol_grad |g_0|, and the steps that
-# chase it change the answer in its 7th or 8th digit (docs/DESIGN.md, "The gradient's round-off").
+# chase it change the answer only below POSITION_TOL (docs/DESIGN.md, "The gradient's round-off").
 POSITION_TOL_GRAD = 1e-3
 # L-BFGS keeps its initial inverse (the Woodbury preconditioner) this many
-# steps: its curvature pairs make up for the lag (measured: docs/DESIGN.md)
+# steps: its curvature pairs make up for the lag (docs/DESIGN.md, "Newton-Krylov details")
 LBFGS_REFRESH = 20
 # The error estimate's FEM corrections: PCG on the last factorisation for at
 # most this many iterations before factorising (SolverOptions::lagged_cg_iterations)
@@ -265,8 +265,9 @@ class Solver:
             opts.lagged_cg_iterations = int(lagged_cg_iterations)
             if self.accuracy is not None:
                 # PCG's forcing term at most sqrt(STEP_GRAD) = 0.1: where the step test
-                # applies its steps are then Newton steps (at 0.5 big_muscle_free's
-                # soft twist gave short steps and a stop 1.02% from the answer)
+                # applies its steps are then Newton steps (with a looser one a soft mode
+                # gives short inexact steps that stop the solve short of the accuracy;
+                # docs/DESIGN.md, "Accuracy mode as shipped")
                 opts.lagged_cg_forcing = ACCURACY_CG_FORCING_MIN
             self.settings.update(lagged_factor=True, lagged_cg_iterations=int(lagged_cg_iterations))
         self.contact = None   # the ContactTerm of a scene with contact (scene.enable_contact)
@@ -333,8 +334,8 @@ class Solver:
             raise ValueError(f"error_estimate_steps must be >= 1, got {error_estimate_steps}")
         self.error_estimate_steps = int(error_estimate_steps)
         # by default not with contact: the corrections are full Newton steps that
-        # know no collision detection, and measured they landed farther than the
-        # accuracy while the estimate itself stayed right (docs/DESIGN.md, "Contact")
+        # know no collision detection, and they can land farther than the accuracy
+        # while the estimate itself is right (docs/DESIGN.md, "Contact")
         if fem_correction is None:
             fem_correction = self.contact is None
         self.fem_correction = bool(fem_correction) and method == "emu"
@@ -601,7 +602,8 @@ class Solver:
         if self._estimator is None and not self._estimator_error:
             opts = _core.SolverOptions()
             # the corrections of a sequence's frames (and of accuracy mode's
-            # re-solves) by PCG on the last factorisation (docs/DESIGN.md)
+            # re-solves) by PCG on the last factorisation (docs/DESIGN.md, "The FEM
+            # baselines: a factorisation per step, or a lagged factor")
             opts.lagged_cg_iterations = ESTIMATE_LAGGED_CG   # (without contact: its pattern changes)
             try:   # the same energy as EMU's, contact included
                 self._estimator = self._named(_core.FemSolver, self.model, opts, self.contact)

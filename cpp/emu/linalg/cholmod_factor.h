@@ -65,11 +65,9 @@ class CholmodFactor {
 
   /// Supernodal factors with at least this many entries are factorised with
   /// OpenBLAS's threads as set_threads set them, smaller ones on one BLAS
-  /// thread: measured at 2 threads, FEM's 28M-entry factor (fusiform_80k)
-  /// 1.4x faster threaded, an 11.3M-entry one (a 41k-tet fusiform) 1.3-1.5x
-  /// per factorisation, a 3.6M-entry one (fusiform_20k) no faster, and the
-  /// demo's small ones 2x slower (DESIGN.md, "OpenBLAS's threads on small
-  /// factors").
+  /// thread: BLAS threads gain only on large factors, and on small ones
+  /// their worker contends with the OpenMP team (docs/DESIGN.md, "OpenBLAS's
+  /// threads on small factors").
   static constexpr std::size_t kThreadedBlasFactorEntries = 10'000'000;
 
  private:

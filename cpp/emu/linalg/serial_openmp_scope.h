@@ -6,9 +6,9 @@
 // supernodal numeric factorisation, per supernode (zeroing and scattering
 // into the supernode's panel), with a fixed num_threads(CHOLMOD_OMP_NUM_THREADS
 // = 4) clause that overrides omp_set_num_threads. On a 2-core machine that is
-// a team of 4 woken for a few hundred entries, thousands of times: at 81k
-// tets `perf` put a third of EMU's setup in the futex wakes and waits, and
-// a "1 thread" run used more than one core. The parallel work of the
+// a team of 4 woken for a few hundred entries, thousands of times: futex
+// wakes and waits take a large share of a big mesh's setup, and a "1 thread"
+// run uses more than one core. The parallel work of the
 // factorisation is its BLAS (OpenBLAS's own threads, set by set_threads), so
 // those regions are run serially (docs/DESIGN.md, "CHOLMOD's OpenMP regions").
 //

@@ -5,8 +5,8 @@
 // its mirror: the result is exactly symmetric). For the 9x9 per-unknown
 // blocks of the Newton-Krylov preconditioners, one inversion per unknown and
 // rebuild: Eigen's LLT<Mat9>::solve(Identity) goes through its general
-// triangular-solve kernels at this size (docs/DESIGN.md, "The cost of an
-// iteration": measured in bench/micro/bench_kernels).
+// triangular-solve kernels, slower at this size (docs/DESIGN.md, "The cost
+// of an iteration").
 #include <cmath>
 #include <vector>
 
@@ -59,7 +59,7 @@ bool spd_inverse(const Eigen::Matrix<double, N, N>& A, Eigen::Matrix<double, N, 
 /// same order as spd_inverse, which only adds exact zeros besides: the same
 /// bits (tested). ok[l]: block l was positive definite (else inv[l] is
 /// unspecified). A, inv: L blocks each (docs/DESIGN.md, "The cost of an
-/// iteration": bench_kernels block_inverse).
+/// iteration").
 template <int N, int L>
 void spd_inverse_lanes(const Eigen::Matrix<double, N, N>* A, Eigen::Matrix<double, N, N>* inv, bool* ok) {
   double a[N][N][L], Lf[N][N][L], W[N][N][L], rinv[N][L];

@@ -4,10 +4,8 @@
 //
 // Why not cholmod_solve2: with 2-4 right-hand sides CHOLMOD calls dtrsm and
 // dgemm per supernode, and OpenBLAS packs (copies) the supernode's panel
-// before every such thin product; at the 81k-tet fusiform's ACAP factor
-// (3.3M entries) the packing took as long as the products (perf:
-// dgemm_incopy / itcopy 14% of an EMU solve against dgemm_kernel's 9%;
-// docs/DESIGN.md, "The cost of an iteration").
+// before every such thin product, which on a large ACAP factor costs as much
+// as the products themselves (docs/DESIGN.md, "The cost of an iteration").
 #include <vector>
 
 #include <cholmod.h>

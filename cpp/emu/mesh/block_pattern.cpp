@@ -26,7 +26,7 @@ BlockPattern::BlockPattern(const Eigen::MatrixX4i& T, const Eigen::VectorXi& fre
   // Column-major order of blocks, contributions in (tet, corner) order: the
   // entries are made in (t, ab) order, so two stable counting sorts, by vi and
   // then by vj, leave them in (vj, vi, t, ab) order in linear time (a
-  // comparison sort was a quarter of EMU's setup at 80k tets).
+  // comparison sort is a large share of EMU's setup on big meshes).
   std::vector<Entry> sorted(entries.size());
   std::vector<int> start(static_cast<size_t>(num_free_) + 1);
   auto stable_sort_by = [&](int Entry::*key) {
@@ -121,8 +121,9 @@ void BlockPattern::assemble(const double* element, double* values) const {
 
 namespace {
 // The gather with its width known at compile time (3: a vertex's x, y, z),
-// so the sums are unrolled: the runtime-width loop was a tenth of a CG
-// iteration on the demo's scene (docs/DESIGN.md). The same order of sums.
+// so the sums are unrolled: a runtime-width loop costs a large share of a CG
+// iteration (docs/DESIGN.md, "Tet order and the fit's per-vertex sums"). The
+// same order of sums.
 template <int W>
 void gather_fixed(int num_free, const std::vector<int>& ptr, const std::vector<int>& incidence,
                   const double* corner, double* out) {

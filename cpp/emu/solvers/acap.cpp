@@ -82,8 +82,8 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
   pattern_->assemble(element.data(), values.data());
   // METIS where it pays (docs/DESIGN.md, "Orderings"): CHOLMOD's default
   // keeps AMD for the ACAP matrix of a compact 3D mesh at any size, while
-  // METIS fills 24% less at 81k tets (3.29M against 4.32M entries: a fit 18
-  // against 20 ms); below 10,000 rows it gained at most 3% and cost 15 ms.
+  // METIS fills less on large meshes; below kAcapMetisRows its gain is too
+  // small to pay for its analysis.
   factor_.set_metis_from_rows(kAcapMetisRows);
   if (pattern_of) factor_.analyze_like(pattern_of->factor_);
   else factor_.analyze(pattern_->rows(), pattern_->col_ptr().data(), pattern_->row_index().data());
@@ -98,7 +98,8 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
   // Factorised once, solved two or three times per CG iteration with 3
   // right-hand sides: the factor stays supernodal, solved by
   // supernodal_solve_in_place (CholmodFactor::solve), which beats CHOLMOD's
-  // simplicial solve on small meshes as well (docs/DESIGN.md).
+  // simplicial solve on small meshes as well (docs/DESIGN.md, "The cost of
+  // an iteration").
 }
 
 void AcapOperator::setup_bones(const AcapOperator* same_model) {

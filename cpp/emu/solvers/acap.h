@@ -144,14 +144,14 @@ class AcapOperator {
   // or tissue held between its vertices). Such a tet's corners add
   // sum_a phi_a (w V T b_a)^T = w V [T^T; 0] to b's rows of C T (sum_a b_a = 0,
   // sum_a X_a b_a^T = I), and its F_t(S u) is the linear part of b's map,
-  // u_b's top three rows transposed: no per-corner work (a fifth of arm_r5's tets).
+  // u_b's top three rows transposed: no per-corner work.
   std::vector<int> rigid_tets_, rigid_tet_bone_;
   std::vector<char> is_rigid_;  // #T with bones, else empty
   // Of the rigid tets, those whose unknown is their bone's own (the bone's
   // tets, not tissue held between its vertices) add the same T to their
   // bone's rows: apply_C_of_unknowns adds them at once, (sum w V) T_b^T per
-  // bone (a serial loop over every such tet was a tenth of a CG iteration
-  // on the demo's scene at two threads).
+  // bone (a serial loop over every such tet per application costs too much;
+  // docs/DESIGN.md, "The cost of an iteration").
   Eigen::VectorXd rigid_own_wv_;                      // per bone: sum of w V over its own rigid tets
   std::vector<int> rigid_own_tets_;                   // per bone: one of them (-1: none)
   std::vector<int> rigid_other_tets_, rigid_other_bone_;  // the other rigid tets and their bones

@@ -144,7 +144,7 @@ void BoneCoarseSpace::combine_Z(const Mat9X& a, double s, const Eigen::VectorXd&
   for (int u = 0; u < nu; ++u) {
     Vec9 add = Vec9::Zero();
     if (u < ns) {
-      // follow's column read in place (a copy through the stack stalled the loads)
+      // follow's column read in place (a copy through the stack stalls the loads)
       for (int b = 0; b < nb; ++b) add += flatten(Mat3(combined_[b] * Eigen::Map<const Mat3>(follow_[b]->col(u).data())));
     } else {
       add = flatten(combined_[u - ns]);

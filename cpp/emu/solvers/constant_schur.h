@@ -13,10 +13,10 @@
 // A movable bone's tets weigh w V, the limit h -> infinity: its unknown is a
 // rotation, so every other affine motion of its fit is infinitely stiff, and
 // its turns are the bone coarse space's (bone_coarse_space.h). (In S itself
-// they add nothing on the affine maps the fit allows; a token weight instead
-// took 279 CG against 176 on arm_r5; scaled like the soft tissue, c w V, so
-// that S0 = c K, the strict solve of realistic_biceps at 300 mu did not
-// converge: docs/DESIGN.md.) Where every e_t / (w_t V_t) is the same c (one
+// they add nothing on the affine maps the fit allows; a token weight costs CG
+// iterations, and c w V like the soft tissue, which would make S0 = c K, can
+// keep a strict solve from converging: docs/DESIGN.md, "The constant
+// Schur-complement preconditioner".) Where every e_t / (w_t V_t) is the same c (one
 // tissue without movable bones), S0 = c K and K's factor serves: nothing more
 // is factorised, for any alpha. Otherwise S0 is factorised once per alpha (an
 // AcapOperator with these weights on the ACAP matrix's symbolic analysis: a
@@ -26,7 +26,7 @@
 // scalar per tet stands for the material's curvatures (nearly incompressible
 // tissue: lambda ~ 25 mu), independent of the mesh size, where the Woodbury
 // approximation's k modes cover a shrinking share of the spectrum as the mesh
-// grows (docs/DESIGN.md: measured).
+// grows (docs/DESIGN.md, "The constant Schur-complement preconditioner").
 #include <memory>
 #include <vector>
 

@@ -311,9 +311,9 @@ double EmuSolver::gradient_floor(const Context& c) const {
   // 1e-13 of the summed moduli V (alpha w + mu + lambda + a) of the soft tets:
   // round-off in P(F) scales with lambda, in the coupling with alpha w. A bone
   // unknown's gradient sums its tets' coupling terms, whose round-off errors
-  // add like random ones: the root of their summed squares. (Their plain sum,
-  // with the bones' ACAP weight 1e4, stopped simple_joint at alpha = 1e4 mu as
-  // "converged" at |g|/|g0| = 4e-4, 1.7e-3 of the diagonal from its answer.)
+  // add like random ones: the root of their summed squares (their plain sum
+  // would make the floor the stopping test at large alpha; docs/DESIGN.md,
+  // "Stopping and round-off").
   double soft = 0, bone_sq = 0;
   for (Eigen::Index t = 0; t < model_.tets.rows(); ++t) {
     const double v = layout_.geometry.volume(t);
@@ -645,7 +645,7 @@ class EmuSolver::Newton {
   // A CG solve far longer than the last one met a mode the preconditioner
   // misses; its direction (orthogonalised against those kept) joins the bone
   // coarse space of the following steps, the oldest dropped beyond
-  // EmuOptions::recycled_directions (docs/DESIGN.md: measured).
+  // EmuOptions::recycled_directions (docs/DESIGN.md, "The cost of an iteration").
   void recycle(const Mat9X& d) {
     Mat9X dn = d;
     for (const Mat9X& r : recycled_) dn -= (dot(r, dn) / dot(r, r)) * r;

@@ -146,8 +146,8 @@ class EmuSolver {
   // |g| at the exact rest equilibrium (F = I, no load) per unit alpha: the
   // round-off of the fit, which the ACAP matrix's conditioning (bone weights
   // 1e4) lifts above gradient_floor's scale estimate: a start below 10x it is
-  // converged (as a floor for every iterate it stopped the arm at alpha = 1e5 mu
-  // three times farther from FEM: tests/test_error_estimate.py).
+  // converged. Only the start: as a floor for every iterate it stops large-alpha
+  // solves too early (docs/DESIGN.md, "Stopping and round-off").
   double rest_gradient_per_alpha_ = 0;
   mutable std::vector<double> tet_energy_;
   std::unique_ptr<BoneTurnFits> turn_fits_;  // movable bones with the coarse space, else empty

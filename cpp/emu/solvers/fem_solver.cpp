@@ -175,11 +175,11 @@ constexpr double kCorrectionResidual = 1e-3;
 // The negative-curvature step (add_negative_curvature): looked for where the
 // exact Hessian is indefinite and the filtered step stalls, its slope -g.d
 // (twice the decrease it predicts) at most kSaddleDecrease of the decrease so
-// far (near a stationary point; earlier, far from one, it cost iterations);
+// far (only near a stationary point: far from one it costs iterations);
 // power iterations to kCurvatureRtol; taken where v^T H v <= (1 -
 // kCurvatureMin) v^T H+ v (clearly negative); its largest vertex move
-// kCurvatureLength of the mesh diagonal (1e-3 to 3e-2: the same within 10%).
-// Measured on the stress cases: docs/stability.md.
+// kCurvatureLength of the mesh diagonal (the outcome is insensitive to it;
+// docs/stability.md).
 constexpr double kSaddleDecrease = 1e-3, kCurvatureRtol = 1e-3, kCurvatureMin = 1.01, kCurvatureLength = 1e-2;
 constexpr int kCurvatureIterations = 40;
 }  // namespace
@@ -510,7 +510,8 @@ class FemSolver::Newton {
   // Near a stationary point where the exact Hessian H is indefinite (a saddle:
   // a symmetric shape about to buckle) the filtered Newton step barely moves
   // along H's negative curvature, and leaving the saddle waits for round-off
-  // to grow the asymmetry (300 steps at Poisson 0.4999: docs/stability.md).
+  // to grow the asymmetry, which is slow (docs/DESIGN.md, "Saddles: FEM's
+  // negative-curvature step").
   // Add the direction of H's most negative curvature relative to the filtered
   // matrix H+ just factorised (linalg/negative_curvature.h: power iteration on
   // H+^-1 N, N = H+ - H), pointing downhill, one hundredth of the mesh
@@ -598,7 +599,7 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
 
 namespace {
 // newton_correction: the gradient reduction of an exact step that counts as
-// Newton's regime (measured: docs/DESIGN.md, "EMU's error estimate").
+// Newton's regime (docs/DESIGN.md, "EMU's error estimate").
 constexpr double kCorrectionContraction = 0.1;
 }  // namespace
 

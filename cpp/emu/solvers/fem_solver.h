@@ -36,7 +36,8 @@ class FemSolver {
 
   /// Which Newton matrix newton_correction uses: the exact one (where it is
   /// definite), the PSD-filtered one, or both and the step that ends at the
-  /// lower FEM energy (measured to estimate EMU's error best: docs/DESIGN.md).
+  /// lower FEM energy (the best estimate of EMU's error; docs/DESIGN.md,
+  /// "EMU's error estimate").
   /// LaggedNewton: the exact Newton step by PCG on the last factorisation only,
   /// nothing factorised; where that PCG fails no step (accuracy mode's cheap
   /// corrections, which only Newton's regime can certify).

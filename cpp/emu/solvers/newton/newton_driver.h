@@ -59,8 +59,8 @@ constexpr double kNoiseFrom = 1e-3, kNoiseBand = 100.0;
 /// SolverOptions::step_tol_cold_scale, else 0. The step test's gate |g| <=
 /// step_tol_grad g_ref uses g_ref = max(|g_0|, cold_g0): "near equilibrium"
 /// on the scale of the load, as for a cold solve, not relative to a warm
-/// start's already small |g_0| (which made a start close to the answer solve
-/// 1 / step_tol_grad times tighter than a cold one). Its first step may then
+/// start's already small |g_0| (which would make a start close to the answer
+/// solve 1 / step_tol_grad times tighter than a cold one). Its first step may then
 /// be a loose one (Eisenstat-Walker's 0.5 against the warm |g_0|): accuracy
 /// mode's error estimate checks the answer (docs/DESIGN.md, "The gate of a
 /// warm start").
