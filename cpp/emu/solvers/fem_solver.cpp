@@ -139,24 +139,8 @@ void FemSolver::set_contact_hessian(const Eigen::MatrixX3d& x) {
 bool FemSolver::factorize_newton_matrix() {
   use_merged_ = has_contact() && contact_soft_.nonZeros() > 0;
   if (!use_merged_) return factor_.factorize(values_.data());
-  const int n = pattern_.rows();
-  const Eigen::Map<const Eigen::SparseMatrix<double>> K(n, n, pattern_.nnz(), pattern_.col_ptr().data(),
-                                                        pattern_.row_index().data(), values_.data());
-  Eigen::SparseMatrix<double> A = K + contact_soft_;  // sorted row indices (Eigen merges the columns)
-  A.makeCompressed();
-  const int* cp = A.outerIndexPtr();
-  const int* ri = A.innerIndexPtr();
-  const bool same = merged_factor_ && merged_col_ptr_.size() == size_t(n + 1) &&
-                    std::equal(cp, cp + n + 1, merged_col_ptr_.begin()) &&
-                    merged_row_index_.size() == size_t(A.nonZeros()) &&
-                    std::equal(ri, ri + A.nonZeros(), merged_row_index_.begin());
-  if (!same) {  // the contact pairs changed: a new symbolic analysis
-    merged_factor_ = std::make_unique<CholmodFactor>();
-    merged_factor_->analyze(n, cp, ri);
-    merged_col_ptr_.assign(cp, cp + n + 1);
-    merged_row_index_.assign(ri, ri + A.nonZeros());
-  }
-  return merged_factor_->factorize(A.valuePtr());
+  return merged_factor_.factorize(pattern_.rows(), pattern_.col_ptr().data(), pattern_.row_index().data(),
+                                  values_.data(), contact_soft_);
 }
 
 double FemSolver::gradient_floor(const Eigen::VectorXd& act) const {

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "emu/linalg/cholmod_factor.h"
+#include "emu/linalg/merged_pattern_factor.h"
 #include "emu/mesh/block_pattern.h"
 #include "emu/contact/position_term.h"
 #include "emu/model/unknown_layout.h"
@@ -102,7 +103,7 @@ class FemSolver {
   /// the merged pattern, analysed again when that changes); false if it is not
   /// positive definite. newton_factor() is the factor it used.
   bool factorize_newton_matrix();
-  const CholmodFactor& newton_factor() const { return use_merged_ ? *merged_factor_ : factor_; }
+  const CholmodFactor& newton_factor() const { return use_merged_ ? merged_factor_.factor() : factor_; }
 
   Model model_;
   UnknownLayout layout_;
@@ -123,8 +124,7 @@ class FemSolver {
   };
   LaggedFactor lag_;
   Eigen::SparseMatrix<double> contact_H_, contact_soft_;
-  std::unique_ptr<CholmodFactor> merged_factor_;  // soft block + contact, on the merged pattern
-  std::vector<int> merged_col_ptr_, merged_row_index_;  // the pattern merged_factor_ analysed
+  MergedPatternFactor merged_factor_;  // soft block + contact, on the merged pattern
   bool use_merged_ = false;
   int factorizations_ = 0;  // numeric factorisations of the Newton matrix so far
   double setup_seconds_ = 0;
