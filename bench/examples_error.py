@@ -23,7 +23,7 @@ import numpy as np
 
 import emu
 from emu.app.scenefile import load_scene_file
-from emu.io.plots import contact_sheet, default_view
+from emu.io.plots import contact_sheet, default_view, frame_title
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PICTURE_FRAMES = 8
@@ -98,10 +98,7 @@ def write_page(results, docs_dir, header: str) -> str:
         spec, rows = r["spec"], r["rows"]
         png = os.path.join(img_dir, name + ".png")
         ks = sorted(r["frames"])
-        titles = []
-        for k in ks:
-            turn = ", ".join(f"{b} {a:+.0f}\u00b0" for b, a in list(rows[k]["angles"].items())[:2])
-            titles.append(f"frame {k}, t = {rows[k]['time']:.2f} s" + (f"\n{turn}" if turn else ""))
+        titles = [frame_title(k, rows[k]["time"], rows[k]["angles"]) for k in ks]
         contact_sheet(png, spec.scene, [r["frames"][k] for k in ks], titles=titles,
                       activations=[rows[k]["activation"] for k in ks],
                       view=spec.output.get("view") or default_view(spec.scene))

@@ -49,3 +49,10 @@ def test_default_view_looks_along_the_hinge():
     assert depth not in view and len(set(view)) == 2
     extent = np.ptp(scene.points, axis=0)
     assert extent[view[1]] >= extent[view[0]]
+
+
+def test_frame_title_names_the_frame_and_the_first_two_bones():
+    from emu.io.plots import frame_title
+    assert frame_title(3, 0.5, {"ulna": 12.3, "humerus": -4.0, "scapula": 1.0}) == \
+        "frame 3, t = 0.50 s\nulna +12\u00b0, humerus -4\u00b0"
+    assert frame_title(0, 0.0, {}) == "frame 0, t = 0.00 s"   # no bones: one line

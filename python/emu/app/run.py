@@ -20,7 +20,7 @@ import numpy as np
 from ..advice import method_hint
 from ..bones import bone_angle
 from ..io.obj import boundary_faces, part_groups, write_obj
-from ..io.plots import contact_sheet, default_view
+from ..io.plots import contact_sheet, default_view, frame_title
 from ..io.vtk import write_pvd, write_solution
 from ..runtime import info as runtime_info
 from ..solve import Solver
@@ -51,11 +51,7 @@ def _preview(path, spec: SceneSpec, kept: dict, log: dict) -> None:
     frames = sorted(kept)
     entries = [log["frames"][k] for k in frames]
     acts = [scene.normalised_activation(e["activation"]) for e in entries]
-    titles = []
-    for e in entries:
-        angles = e["bone_angles_deg"]
-        turn = "" if not angles else "\n" + ", ".join(f"{b} {a:+.0f}\u00b0" for b, a in list(angles.items())[:2])
-        titles.append(f"frame {e['frame']}, t = {e['time']:.2f} s{turn}")
+    titles = [frame_title(e["frame"], e["time"], e["bone_angles_deg"]) for e in entries]
     contact_sheet(path, scene, [kept[k] for k in frames], titles=titles, activations=acts,
                   view=spec.output.get("view") or default_view(scene))
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from .obj import boundary_faces
 
-__all__ = ["contact_sheet", "angle_activation_plot", "default_view", "muscle_colour"]
+__all__ = ["contact_sheet", "angle_activation_plot", "default_view", "frame_title", "muscle_colour"]
 
 PART_COLOURS = {"bone": (0.93, 0.90, 0.80), "tendon": (0.85, 0.85, 0.95), "muscle": (0.80, 0.35, 0.35)}
 
@@ -77,6 +77,13 @@ def default_view(scene, points=None) -> tuple:
     depth = int(np.argmax(np.abs(hinges[0].axis))) if hinges else int(np.argmin(extent))
     a, b = [k for k in range(3) if k != depth]
     return (a, b) if extent[b] >= extent[a] else (b, a)
+
+
+def frame_title(frame: int, time: float, bone_angles: dict) -> str:
+    """A contact sheet's title for one frame: its number and time, and on a
+    second line the first two bones' angles (degrees) where bones move."""
+    turn = ", ".join(f"{b} {a:+.0f}\u00b0" for b, a in list(bone_angles.items())[:2])
+    return f"frame {frame}, t = {time:.2f} s" + (f"\n{turn}" if turn else "")
 
 
 def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0, 1), columns=None):
