@@ -3,9 +3,9 @@ Newton matrix in the solver's reduced unknowns (free soft displacements, then
 each movable bone's exponential-map turn and, for a free bone, translation),
 for single bones and for chains (a bone jointed to a movable bone turns with it).
 
-E(z) is the energy at increment z from a state x0 (FemSolver.reduced_energy,
+E(z) is the energy at increment z from a state x0 (_core.testing.reduced_energy,
 which moves the bones by exp([w]_x) R); the solver's own gradient and dense
-Hessian at z = 0 (FemSolver.reduced_system) must be its first and second
+Hessian at z = 0 (_core.testing.reduced_system) must be its first and second
 derivatives, including the rotation's second-order term and the joint spring."""
 from __future__ import annotations
 

@@ -40,8 +40,8 @@ SolveResult run_solve(F&& f) {
 
 // A Python contact term (emu.contact.ContactTerm: energy, gradient, hessian,
 // max_step of #V by 3 positions) as the solvers' PositionTerm. The object is
-// held by a shared_ptr whose deleter takes the GIL, so SolverOptions can be
-// copied and destroyed without it; each call takes the GIL and lets a Python
+// held by a shared_ptr whose deleter takes the GIL, so a solver holding it can
+// be destroyed without it; each call takes the GIL and lets a Python
 // exception propagate (the solvers call it outside OpenMP regions).
 PositionTerm python_position_term(const py::object& obj) {
   std::shared_ptr<py::object> o(new py::object(obj), [](py::object* p) {
@@ -256,7 +256,8 @@ void bind_fem_solver(py::module_& m) {
           },
           py::arg("load"), py::arg("x0"), py::arg("on_iteration") = py::none())
       .def("structures", &FemSolver::structures, "(name, bytes) of the structures this solver built")
-      .def_property_readonly("model", &FemSolver::model, "the model as this solver stores it (tets in its order)")
+      .def_property_readonly("model", &FemSolver::model, py::return_value_policy::copy,
+                             "a copy of the model as this solver stores it (tets in its order)")
       .def(
           "newton_correction",
           [](FemSolver& s, const LoadCase& l, const Eigen::MatrixX3d& x0, const std::string& hessian, int max_steps) {
@@ -315,7 +316,8 @@ void bind_emu_solver(py::module_& m) {
           },
           "#scene tets: the F unknown each tet of the scene uses (soft tets in the solver's order, then one per "
           "movable bone; -1: a tet without unknowns)")
-      .def_property_readonly("model", &EmuSolver::model, "the model as this solver stores it (tets in its order)")
+      .def_property_readonly("model", &EmuSolver::model, py::return_value_policy::copy,
+                             "a copy of the model as this solver stores it (tets in its order)")
       .def_property("alpha", &EmuSolver::alpha, &EmuSolver::set_alpha, "absolute alpha (settable between solves)")
       .def_property("cg_forcing_max", &EmuSolver::cg_forcing_max, &EmuSolver::set_cg_forcing_max,
                     "Eisenstat-Walker cap on the CG forcing term (settable between solves)")

@@ -26,7 +26,8 @@ class BlockPreconditioner {
   virtual const char* failure() const = 0;
   /// out = M^-1 r; r, out are 9 x #unknowns.
   virtual void apply(const Mat9X& r, Mat9X& out) const = 0;
-  /// A new alpha for the following update() calls (nothing is refactorised).
+  /// A new alpha for the following update() calls (the constant Schur
+  /// preconditioner factorises its S0 again; the others only keep the value).
   virtual void set_alpha(double alpha) = 0;
   /// Whether update() factorises a sparse matrix (counted in the solve's factorizations).
   virtual bool factorises_on_update() const { return false; }

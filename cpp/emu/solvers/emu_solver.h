@@ -44,6 +44,9 @@ class EmuSolver {
   /// contact  barriers on the fitted positions x*(F) (an inactive term: none)
   EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options,
             PositionTerm contact = {});
+  // Its parts hold references to the model and layout it owns: not copied or moved.
+  EmuSolver(const EmuSolver&) = delete;
+  EmuSolver& operator=(const EmuSolver&) = delete;
 
   /// F0  start: one F per tet of the scene (Model::scene_tet_count() by 9, F
   ///     row-major per row, as SolveResult::F); a bone's F is read from its
@@ -58,8 +61,9 @@ class EmuSolver {
   /// The ACAP modes of the Woodbury preconditioner (0 with another one).
   int modes() const { return modes_; }
   double alpha() const { return emu_.alpha; }
-  /// A new (absolute) alpha for the following solves: nothing is refactorised
-  /// (the ACAP matrix and its modes do not depend on alpha).
+  /// A new (absolute) alpha for the following solves. The ACAP matrix and its
+  /// modes do not depend on alpha; the constant Schur preconditioner's S0
+  /// does, and is factorised again.
   void set_alpha(double alpha);
   /// The Eisenstat-Walker cap eta_max for the following solves (0 < eta_max < 1).
   void set_cg_forcing_max(double eta_max);

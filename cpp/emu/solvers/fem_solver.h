@@ -31,6 +31,9 @@ class FemSolver {
   ///          Newton matrix, every step capped by continuous collision
   ///          detection (an inactive term: none)
   FemSolver(const Model& model, const SolverOptions& options, PositionTerm contact = {});
+  // Its parts hold references to the model and layout it owns: not copied or moved.
+  FemSolver(const FemSolver&) = delete;
+  FemSolver& operator=(const FemSolver&) = delete;
 
   /// initial  #V by 3 start positions (nullptr: rest); pinned rows are replaced by the load's.
   SolveResult solve(const LoadCase& load, const Eigen::MatrixX3d* initial = nullptr);
