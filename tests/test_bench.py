@@ -210,3 +210,11 @@ def test_shipped_small(tmp_path):
     seq = json.loads((tmp_path / "shipped_sequences.json").read_text())[0]
     assert len(seq["runs"]["emu"]["frame_s"]) == 3 and max(seq["runs"]["emu"]["errors"]) <= 0.01
     assert seq["runs"]["emu"]["warm_frame_s"] > 0
+
+
+def test_chain_convergence_study_small():
+    out = run(BENCH / "studies" / "chain_convergence.py", "--max-iterations", "30")
+    rows = [line for line in out.splitlines() if line.startswith("| ") and not line.startswith("| variant")]
+    assert [r.split(" | ")[0][2:] for r in rows] == ["default", "filtered Hessian only", "no bone coarse space",
+                                                     "L-BFGS"]
+    assert "FEM" in out.splitlines()[0] and "converged True" in out.splitlines()[0]
