@@ -5,7 +5,6 @@
 #include "emu/mesh/connected_components.h"
 #include "emu/mesh/harmonic_field.h"
 #include "emu/mesh/near_surface.h"
-#include "emu/mesh/spatial_order.h"
 #include "emu/mesh/tet_geometry.h"
 
 namespace py = pybind11;
@@ -43,9 +42,6 @@ void bind_mesh(py::module_& m) {
       py::arg("V"), py::arg("F"), py::arg("Q"), py::arg("max_distance"),
       "V  #V by 3, F  #F by 3 triangles, Q  #Q by 3 queries -> (#Q distances to the nearest triangle, "
       "+inf beyond max_distance; #Q triangle ids, -1 where none)");
-  m.def("spatial_order", &spatial_order, py::arg("X"), py::arg("T"),
-        "X  #V by 3, T  #T by 4 indices -> #T tet ids along a Z-order curve through the centroids "
-        "(equal codes in T's order)");
   m.def("tet_gradients", &tet_gradients, py::arg("X"), py::arg("T"), py::arg("phi"),
         "per-tet gradient of a P1 field -> #T by 3");
 }

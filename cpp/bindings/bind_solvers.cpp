@@ -73,12 +73,10 @@ PositionTerm python_position_term(const py::object& obj) {
 }
 
 // F per tet as Python sees it, (m, 3, 3), from and to the core's m by 9 rows (F row-major per row).
+using RowsX9 = Eigen::Matrix<double, Eigen::Dynamic, 9, Eigen::RowMajor>;
 py::array_t<double> f_array(const Eigen::MatrixXd& rows) {
   py::array_t<double> a({static_cast<py::ssize_t>(rows.rows()), py::ssize_t(3), py::ssize_t(3)});
-  auto v = a.mutable_unchecked<3>();
-  for (Eigen::Index t = 0; t < rows.rows(); ++t)
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) v(t, i, j) = rows(t, 3 * i + j);
+  Eigen::Map<RowsX9>(a.mutable_data(), rows.rows(), 9) = rows;  // C order: row t is F_t row-major
   return a;
 }
 Eigen::MatrixXd f_rows(const py::object& F, Eigen::Index count) {
@@ -86,12 +84,7 @@ Eigen::MatrixXd f_rows(const py::object& F, Eigen::Index count) {
   if (!a || a.ndim() != 3 || a.shape(0) != count || a.shape(1) != 3 || a.shape(2) != 3)
     throw std::invalid_argument("F0 must be one 3x3 deformation gradient per tet of the scene, shape (" +
                                 std::to_string(count) + ", 3, 3)");
-  const auto v = a.unchecked<3>();
-  Eigen::MatrixXd rows(count, 9);
-  for (Eigen::Index t = 0; t < count; ++t)
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) rows(t, 3 * i + j) = v(t, i, j);
-  return rows;
+  return Eigen::Map<const RowsX9>(a.data(), count, 9);
 }
 
 PositionTerm contact_term(const py::object& term) {
@@ -212,7 +205,10 @@ void bind_results(py::module_& m) {
       .def_readonly("phases", &SolveResult::phases)
       .def_readonly("positions", &SolveResult::positions)
       .def_property_readonly(
-          "F", [](const SolveResult& r) -> py::object { return r.F.size() ? py::object(f_array(r.F)) : py::object(py::none()); },
+          "F",
+          [](const SolveResult& r) -> py::object {
+            return r.F.size() ? py::object(f_array(r.F)) : py::object(py::none());
+          },
           "EMU: (#scene tets, 3, 3) F per tet of the scene (identity where a tet has no unknown); FEM: None")
       .def_readonly("converged", &SolveResult::converged)
       .def_readonly("status", &SolveResult::status)

@@ -1,4 +1,3 @@
-#include "emu/model/tet_order.h"
 #include "emu/solvers/emu_solver.h"
 
 #include <Eigen/Eigenvalues>
@@ -12,6 +11,7 @@
 #include "emu/energy/gravity_work.h"
 #include "emu/energy/joint_spring.h"
 #include "emu/linalg/rotation.h"
+#include "emu/model/tet_order.h"
 #include "emu/solvers/bone_coarse_space.h"
 #include "emu/solvers/bone_rotations.h"
 #include "emu/solvers/bone_turn_fits.h"
@@ -348,12 +348,10 @@ Mat9X EmuSolver::start_unknowns(const Eigen::MatrixXd* F0) const {
                                 " by 9, F row-major per row), got " + std::to_string(F0->rows()) + " by " +
                                 std::to_string(F0->cols()));
   if (!F0->allFinite()) throw std::invalid_argument("the start F contains NaN or infinite values");
+  // a row holds F row-major: vec(F^T) column-major
   for (int u = 0; u < nu; ++u) {
     const Eigen::Index row = model_.scene_index(layout_.unknown_tets[layout_.unknown_ptr[u]]);
-    Mat3 M;
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) M(i, j) = (*F0)(row, 3 * i + j);
-    F.col(u) = flatten(M);
+    F.col(u) = flatten(unflatten(F0->row(row).transpose()).transpose());
   }
   for (int u = layout_.num_soft; u < nu; ++u) F.col(u) = flatten(nearest_rotation(unflatten(F.col(u))));
   return F;
@@ -362,11 +360,8 @@ Mat9X EmuSolver::start_unknowns(const Eigen::MatrixXd* F0) const {
 Eigen::MatrixXd EmuSolver::scene_rows(const Mat9X& F) const {
   Eigen::MatrixXd rows(model_.scene_tet_count(), 9);
   rows.rowwise() = Eigen::RowVectorXd::Map(Mat3::Identity().eval().data(), 9);  // tets without unknowns
-  for (Eigen::Index t = 0; t < model_.tets.rows(); ++t) {
-    const Mat3 M = unflatten(F.col(layout_.tet_unknown(t)));
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) rows(model_.scene_index(t), 3 * i + j) = M(i, j);
-  }
+  for (Eigen::Index t = 0; t < model_.tets.rows(); ++t)  // F row-major: vec(F^T)
+    rows.row(model_.scene_index(t)) = flatten(unflatten(F.col(layout_.tet_unknown(t))).transpose()).transpose();
   return rows;
 }
 
@@ -425,7 +420,7 @@ class EmuSolver::Newton {
     {
       ScopedSeconds timer(time.linear_solve);  // the step and the direction's fit
       if (!step_direction(product, dir)) return dir;
-      prepare_line(dir);
+      prepare_line();
     }
     if (s_.has_contact() && !cap_at_contact(dir, time)) return dir;
     exact_step_ = exact;
@@ -613,7 +608,7 @@ class EmuSolver::Newton {
 
   // Without bones x*(F + s d) = x + s dx: one fit per direction. A bone's
   // path R + s d is retracted to rotations, so each trial refits.
-  void prepare_line(const SearchDirection&) {
+  void prepare_line() {
     if (bones_) return;
     s_.fit_linear_into(d_, dx_, Fd_);
     Wx_ = s_.load_work(c_, x_);
