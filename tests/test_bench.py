@@ -215,6 +215,6 @@ def test_shipped_small(tmp_path):
 def test_chain_convergence_study_small():
     out = run(BENCH / "studies" / "chain_convergence.py", "--max-iterations", "30")
     rows = [line for line in out.splitlines() if line.startswith("| ") and not line.startswith("| variant")]
-    assert [r.split(" | ")[0][2:] for r in rows] == ["default", "filtered Hessian only", "no bone coarse space",
-                                                     "L-BFGS"]
+    assert [r.split(" | ")[0][2:] for r in rows] == ["default (joint coordinates)", "per bone",
+                                                     "filtered Hessian only", "no bone coarse space", "L-BFGS"]
     assert "FEM" in out.splitlines()[0] and "converged True" in out.splitlines()[0]

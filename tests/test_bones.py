@@ -602,3 +602,90 @@ def test_emu_at_rest_with_bones_converges_at_once():
     assert sol.converged and sol.iterations == 0, sol.status
     assert sol.status == "converged: initial state is in equilibrium"
     assert emu.vertex_error(sol.positions, scene.points) < 1e-12
+
+
+# ------------------------------------------------------------- EMU in joint coordinates
+def _unknowns(solver, sol):
+    """EMU's unknowns (#unknowns by 9, vec(F) column-major) from a Solution's F per scene tet."""
+    core = solver._core
+    tu = np.asarray(core.tet_unknown)
+    F = np.zeros((core.num_unknowns, 9))
+    for t in np.flatnonzero(tu >= 0):
+        F[tu[t]] = sol.F[t].reshape(3, 3).ravel(order="F")
+    return F
+
+
+@pytest.mark.parametrize("scene", ["chain", "upper_limb"])
+def test_emu_joint_coordinates_hessian_matches_the_tree_retraction(scene):
+    """EMU's bones in joint coordinates: the retraction turns the tree and keeps
+    every hinge between moving bones (the fit's bones stay rigid); its tangent
+    at 0 is the direction; the Newton-Krylov Hessian (SO(3)'s and the chain's
+    curvature) is the second derivative of the energy along it, and symmetric."""
+    s = bone_chain_scene() if scene == "chain" else emu.anatomy.upper_limb(1)
+    act = {m: 0.3 for m in s.muscles}
+    solver = emu.Solver(s, "emu", alpha=100, max_iterations=4)
+    assert solver.bone_coordinates == "joint coordinates"
+    core = solver._core
+    sol = solver.solve(act, normalized=True)
+    load = solver.load_case(act, normalized=True)
+    F = _unknowns(solver, sol)
+    nu, nb = core.num_unknowns, len(s.movable_bones)
+    rng = np.random.default_rng(11)
+    for only_bones in (True, False):
+        D = 1e-2 * rng.standard_normal((nu, 9))
+        if only_bones:
+            D[:-nb] = 0.0
+        D = testing.project_tangent(core, F, D)
+        np.testing.assert_allclose(testing.project_tangent(core, F, D), D, atol=1e-14 * np.abs(D).max())
+        h = 1e-3
+        Fp, Fm = testing.retract(core, F, D, h), testing.retract(core, F, D, -h)
+        np.testing.assert_allclose((Fp - Fm) / (2 * h), D, atol=1e-7 * np.abs(D).max())
+        E0, Ep, Em = (testing.energy(core, load, X) for X in (F, Fp, Fm))
+        g = testing.gradient(core, load, F)
+        # (the bones' Euclidean gradient carries the rigidity's large normal reaction: its round-off)
+        assert abs((Ep - Em) / (2 * h) - np.sum(g * D)) <= 1e-5 * abs(np.sum(g * D)) + 1e-9 * np.abs(g).max()
+        second = (Ep - 2 * E0 + Em) / h**2
+        HD = testing.riemannian_hessian_product(core, load, F, D, True)
+        assert abs(np.sum(D * HD) - second) <= 1e-5 * abs(second), (np.sum(D * HD), second)
+        D2 = testing.project_tangent(core, F, rng.standard_normal((nu, 9)))
+        a = np.sum(D2 * HD)
+        b = np.sum(D * testing.riemannian_hessian_product(core, load, F, D2, True))
+        assert abs(a - b) <= 1e-9 * (abs(a) + abs(b))
+    if scene != "chain":   # the upper limb's joints are declared ones, not shared vertices
+        return
+    # a long step keeps every hinge between moving bones: both turn its axis alike
+    F30 = testing.retract(core, F, D, 30.0)
+    R = {b: F30[nu - nb + i].reshape(3, 3, order="F") for i, b in enumerate(s.movable_bones)}
+    hinges = [j for j in s.joints() if len(j.vertices) == 2 and all(b in R for b in j.bones)]
+    assert hinges
+    for j in hinges:
+        e = np.subtract(*s.points[j.vertices])
+        a, c = (R[b] @ e for b in j.bones)
+        assert np.linalg.norm(a - c) < 1e-12 * np.linalg.norm(e), j
+    assert max(np.linalg.norm(R[b] - F[nu - nb + i].reshape(3, 3, order="F")) for i, b in enumerate(R)) > 0.1
+
+
+def test_emu_chain_converges_like_fem_in_joint_coordinates():
+    """The upper limb's chain without springs (issue 41's case: 114 Newton
+    steps bone by bone): in joint coordinates EMU converges in a few tens, to
+    the same answer as bone by bone, and the filtered fallback's rotation term
+    is clamped (no step without it)."""
+    s = emu.anatomy.upper_limb(1)
+    for name in s.movable_bones:
+        s.parts[name].joint_stiffness = 0.0
+    act = {"biceps": 0.3}
+    joint = emu.Solver(s, "emu", alpha=100).solve(act, normalized=True)
+    per_bone_solver = emu.Solver(s, "emu", alpha=100, joint_coordinates=False)
+    assert per_bone_solver.bone_coordinates == "per bone: joint_coordinates is off"
+    per_bone = per_bone_solver.solve(act, normalized=True)
+    assert joint.converged and per_bone.converged
+    assert joint.iterations <= 40 < per_bone.iterations, (joint.iterations, per_bone.iterations)
+    assert emu.vertex_error(joint, per_bone) < 2e-4
+
+
+def test_emu_loop_of_joints_keeps_per_bone_rotations_and_says_so():
+    s = bone_loop_scene()
+    solver = emu.Solver(s, "emu", alpha=100)
+    assert solver.bone_coordinates.startswith("per bone: ") and "loop" in solver.bone_coordinates
+    sol = solver.solve({"m": 0.3}, normalized=True)
+    assert sol.converged and sol.settings["bone_coordinates"] == solver.bone_coordinates

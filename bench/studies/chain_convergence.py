@@ -1,5 +1,6 @@
 """EMU's Newton on a chain of movable bones (the built-in upper limb, no
-shoulder spring): how the step kinds and Hessians behave, against strict FEM.
+shoulder spring): how the bone coordinates, step kinds and Hessians behave,
+against strict FEM.
 Per variant: Newton iterations, CG iterations, converged, seconds, the error
 to FEM, and the first step lengths (the line search's cuts).
 
@@ -16,7 +17,8 @@ import numpy as np
 import emu
 
 VARIANTS = {
-    "default": {},
+    "default (joint coordinates)": {},
+    "per bone": {"joint_coordinates": False},
     "filtered Hessian only": {"exact_when_definite": False},
     "no bone coarse space": {"bone_coarse_space": False},
     "L-BFGS": {"step": "lbfgs"},

@@ -188,6 +188,7 @@ void bind_options(py::module_& m) {
             o.preconditioner = parse_choice(kEmuPreconditioners, "preconditioner", s);
           })
       .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space)
+      .def_readwrite("joint_coordinates", &EmuOptions::joint_coordinates)
       .def_readwrite("recycled_directions", &EmuOptions::recycled_directions)
       .def_readwrite("single_precision_preconditioner", &EmuOptions::single_precision_preconditioner)
       .def_readwrite("lbfgs_memory", &EmuOptions::lbfgs_memory);
@@ -301,6 +302,8 @@ void bind_emu_solver(py::module_& m) {
           "a solve from F0, (#scene tets, 3, 3) as SolveResult.F")
       .def("structures", &EmuSolver::structures, "(name, bytes) of the structures this solver built")
       .def_property_readonly("modes", &EmuSolver::modes)
+      .def_property_readonly("bone_coordinates", &EmuSolver::bone_coordinates,
+                             "how movable bones turn: 'joint coordinates', 'per bone: <why>', '' without bones")
       .def_property_readonly("num_unknowns", &EmuSolver::num_unknowns)
       .def_property_readonly(
           "tet_unknown",

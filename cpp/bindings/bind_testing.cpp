@@ -22,6 +22,10 @@ void bind_emu_testing(py::module_& t) {
   t.def("fit_positions", &EmuSolverTesting::fit_positions, py::arg("solver"), py::arg("load"), py::arg("F"), gil());
   t.def("hessian_product", &EmuSolverTesting::hessian_product, py::arg("solver"), py::arg("load"), py::arg("F"),
         py::arg("V"), py::arg("exact") = false, gil());
+  t.def("riemannian_hessian_product", &EmuSolverTesting::riemannian_hessian_product, py::arg("solver"),
+        py::arg("load"), py::arg("F"), py::arg("V"), py::arg("exact") = false, gil());
+  t.def("project_tangent", &EmuSolverTesting::project_tangent, py::arg("solver"), py::arg("F"), py::arg("V"), gil());
+  t.def("retract", &EmuSolverTesting::retract, py::arg("solver"), py::arg("F"), py::arg("D"), py::arg("step"), gil());
   t.def("block_hessians", &EmuSolverTesting::block_hessians, py::arg("solver"), py::arg("load"), py::arg("F"),
         py::arg("exact") = false, gil());
   t.def("woodbury_solve", &EmuSolverTesting::woodbury_solve, py::arg("solver"), py::arg("load"), py::arg("F"),

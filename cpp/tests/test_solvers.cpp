@@ -17,6 +17,7 @@
 #include "emu/solvers/emu_solver_testing.h"
 #include "emu/solvers/fem_solver.h"
 #include "emu/solvers/fem_solver_testing.h"
+#include "emu/solvers/joint_coordinates.h"
 
 using namespace emu;
 
@@ -68,6 +69,96 @@ TEST(bone_columns_are_projected_and_retracted_onto_rotations) {
     CHECK((K + K.transpose()).norm() < 1e-12);
     const Mat3 Q = unflatten(out.col(u));
     CHECK((Q.transpose() * Q - Mat3::Identity()).norm() < 1e-12 && Q.determinant() > 0);
+  }
+}
+
+namespace {
+// A chain of three movable bones: a root on a ball joint, a hinge child about
+// rest axis a1 and a hinge grandchild about a2, after two soft unknowns; F
+// with the bones on their joints (R1 = R0 exp(0.4 a1), R2 = R1 exp(-0.7 a2)).
+struct Chain {
+  const Vec3 a1 = Vec3(1, 0, 0), a2 = Vec3(0, 0.6, 0.8);
+  JointCoordinates joints;
+  Mat9X F = Mat9X::Random(9, 5);
+  Chain() : joints(forest(), 2) {
+    const Mat3 R0 = rotation_exp(Vec3(0.3, -0.5, 0.9)), R1 = R0 * rotation_exp(0.4 * a1);
+    F.col(2) = flatten(R0);
+    F.col(3) = flatten(R1);
+    F.col(4) = flatten(Mat3(R1 * rotation_exp(-0.7 * a2)));
+  }
+  BoneForest forest() const {
+    std::vector<BoneForest::Node> nodes(3);
+    nodes[0].kind = BoneForest::Kind::Ball;
+    for (int b : {1, 2}) {
+      nodes[b].kind = BoneForest::Kind::Hinge;
+      nodes[b].parent = b - 1;
+    }
+    nodes[1].rest_axis = a1;
+    nodes[2].rest_axis = a2;
+    return BoneForest(nodes, {0, 1, 2});
+  }
+  Mat3 R(const Mat9X& G, int b) const { return unflatten(G.col(2 + b)); }
+  // the hinges' axes agree between child and parent
+  double joint_gap(const Mat9X& G) const {
+    return (R(G, 1) * a1 - R(G, 0) * a1).norm() + (R(G, 2) * a2 - R(G, 1) * a2).norm();
+  }
+};
+}  // namespace
+
+TEST(joint_coordinates_project_and_retract_along_the_tree) {
+  Chain c;
+  CHECK(c.joints.size() == 5 && c.joint_gap(c.F) < 1e-14);
+  const Mat9X d = Mat9X::Random(9, 5), e = Mat9X::Random(9, 5);
+  Mat9X v = d, w = e;
+  c.joints.project(c.F, v);
+  c.joints.project(c.F, w);
+  CHECK((v.leftCols(2) - d.leftCols(2)).norm() == 0.0);  // soft columns untouched
+  Mat9X vv = v;
+  c.joints.project(c.F, vv);
+  CHECK((vv - v).norm() < 1e-13);                                        // idempotent
+  CHECK(std::abs(v.rightCols(3).cwiseProduct(e.rightCols(3)).sum() -
+                 d.rightCols(3).cwiseProduct(w.rightCols(3)).sum()) < 1e-12);  // orthogonal
+  for (double s : {0.7, -2.0}) {  // the joints hold along the whole path, not to first order
+    Mat9X out;
+    c.joints.retract(c.F, v, s, out);
+    CHECK(c.joint_gap(out) < 1e-12);
+    for (int b = 0; b < 3; ++b) CHECK((c.R(out, b).transpose() * c.R(out, b) - Mat3::Identity()).norm() < 1e-12);
+    CHECK((out.leftCols(2) - (c.F + s * v).leftCols(2)).norm() < 1e-14);
+  }
+  const double h = 1e-6;  // the path's tangent at 0 is v
+  Mat9X plus, minus;
+  c.joints.retract(c.F, v, h, plus);
+  c.joints.retract(c.F, v, -h, minus);
+  CHECK(((plus - minus) / (2 * h) - v).norm() < 1e-8 * v.norm());
+  Mat9X off = c.F;  // a start off its joints goes back onto them
+  off.col(3) = flatten(Mat3(rotation_exp(Vec3(0.05, 0.1, -0.02)) * c.R(c.F, 1)));
+  c.joints.project_onto_joints(off, Eigen::MatrixX3d());
+  CHECK(c.joint_gap(off) < 1e-12);
+}
+
+// The rotation term is the curvature of the tree's retraction: for the linear
+// function f(F) = sum_b <G_b, R_b> (no Euclidean Hessian), d2f/ds2 along
+// retract(F, v, s) at 0 is theta' W theta, theta the joint coordinates of v.
+TEST(joint_coordinates_rotation_term_matches_finite_differences) {
+  Chain c;
+  const Mat9X G = Mat9X::Random(9, 5);
+  auto f = [&](const Mat9X& F) { return F.rightCols(3).cwiseProduct(G.rightCols(3)).sum(); };
+  const Eigen::MatrixXd W = c.joints.rotation_term(c.F, G, false), Wp = c.joints.rotation_term(c.F, G, true);
+  CHECK((W - W.transpose()).norm() < 1e-12 * W.norm());
+  CHECK(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Wp).eigenvalues().minCoeff() > -1e-12 * W.norm());
+  const double h = 1e-4;
+  for (int trial = 0; trial < 4; ++trial) {
+    Mat9X v = Mat9X::Random(9, 5);
+    c.joints.project(c.F, v);
+    Mat9X plus, minus;
+    c.joints.retract(c.F, v, h, plus);
+    c.joints.retract(c.F, v, -h, minus);
+    const double fd = (f(plus) - 2 * f(c.F) + f(minus)) / (h * h);
+    const Eigen::VectorXd theta = c.joints.coordinates(c.F, v);
+    CHECK_CLOSE(theta.dot(W * theta), fd, 1e-6 * std::max(1.0, std::abs(fd)));
+    Mat9X out = Mat9X::Zero(9, 5);  // the product as a tangent: <v, out> = theta' W theta
+    c.joints.add_rotation_product(c.F, W, v, out);
+    CHECK_CLOSE(v.cwiseProduct(out).sum(), theta.dot(W * theta), 1e-10 * std::max(1.0, std::abs(fd)));
   }
 }
 
@@ -534,10 +625,18 @@ TEST(bone_coarse_space_matches_the_dense_balancing_preconditioner) {
   for (Eigen::Index i = 0; i < extra.size(); ++i) extra.data()[i] = g(rng);
   for (Eigen::Index i = 0; i < r.size(); ++i) r.data()[i] = g(rng);
   auto base = [](const Mat9X& in, Mat9X& out) { out = in; };
+  // with a turn map: the coarse turns are T's combinations of the bones'
+  // (bone 1 hinged to bone 0 about the world x axis: 4 joint coordinates)
+  Eigen::MatrixXd T = Eigen::MatrixXd::Zero(3 * nb, 4);
+  T.topLeftCorner(3, 3).setIdentity();
+  T.block(3, 0, 3, 3).setIdentity();
+  T(3, 3) = 1.0;
+  for (int mapped : {0, 1})
   for (int deficient : {0, 1}) {
+    if (mapped && deficient) continue;
     BoneCoarseSpace coarse(layout, 1.0, {&follow[0], &follow[1]});
     turns.clear();
-    coarse.build(F, turn, hprod, {extra});
+    coarse.build(F, turn, hprod, {extra}, mapped ? &T : nullptr);
     CHECK(static_cast<int>(turns.size()) == 3 * nb);
     Eigen::MatrixXd Z(n, 3 * nb + 1);
     for (int j = 0; j < 3 * nb; ++j) Z.col(j) = flat(turns[j]);
@@ -546,6 +645,12 @@ TEST(bone_coarse_space_matches_the_dense_balancing_preconditioner) {
       coarse.build(F, turn, hprod, {turns[1]});
       for (int j = 0; j < 3 * nb; ++j) Z.col(j) = flat(turns[3 * nb + j]);
       Z.col(3 * nb) = Z.col(1);
+    }
+    if (mapped) {  // Z's turn columns combined by T, the recycled direction kept
+      const Eigen::MatrixXd Zt = Z.leftCols(3 * nb) * T;
+      const Eigen::VectorXd z_extra = Z.col(3 * nb);
+      Z.resize(n, 5);
+      Z << Zt, z_extra;
     }
     const Eigen::MatrixXd E = Z.transpose() * H * Z;
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(E);

@@ -194,7 +194,7 @@ class Solver:
 
     def _setup(self, scene: Scene, method: str, *, alpha, modes, step, rtol_grad, rtol_energy, noise_factor,
                position_tol, max_iterations, cg_max_iterations, cg_model_decrease, cg_forcing_min, preconditioner,
-               preconditioner_refresh, bone_coarse_space, exact_when_definite, threads, error_estimate,
+               preconditioner_refresh, bone_coarse_space, joint_coordinates, exact_when_definite, threads, error_estimate,
                error_estimate_steps, accuracy, recycled_directions, lagged_factor, lagged_cg_iterations,
                lbfgs_memory, eigen_filter, negative_curvature, fem_correction, step_fraction,
                single_precision_preconditioner, single_precision_s0):
@@ -307,6 +307,7 @@ class Solver:
             eo.preconditioner_refresh = int(preconditioner_refresh)
             eo.preconditioner = preconditioner
             eo.bone_coarse_space = bool(bone_coarse_space)
+            eo.joint_coordinates = bool(joint_coordinates)
             if int(recycled_directions) < 0:
                 raise ValueError(f"recycled_directions must be >= 0, got {recycled_directions}")
             eo.recycled_directions = int(recycled_directions)
@@ -340,6 +341,8 @@ class Solver:
             fem_correction = self.contact is None
         self.fem_correction = bool(fem_correction) and method == "emu"
         self.settings["fem_correction"] = self.fem_correction
+        if self.scene.movable_bones:
+            self.settings["bone_coordinates"] = self.bone_coordinates
         # accuracy mode's controller (EMU): alpha per solve, answers accepted or corrected
         self._accuracy = (AccuracyMode(self.accuracy, self.fem_correction, self.alpha)
                           if self.accuracy is not None and method == "emu" else None)
@@ -479,6 +482,17 @@ class Solver:
         sol.time_s = time.perf_counter() - t0   # the whole solve, estimates and corrections included
         sol.phase_times["other"] = max(0.0, sol.time_s - sum(v for k, v in sol.phase_times.items() if k != "other"))
         return sol
+
+    @property
+    def bone_coordinates(self) -> str:
+        """How this solver turns movable bones: "joint coordinates" (each
+        bone's turn the sum of its chain's joint turns; FEM always, EMU where
+        the joints form trees) or, for EMU, "per bone: <why>" (joints that close
+        a loop or weld two bones, or ``joint_coordinates=False``); "" without
+        movable bones."""
+        if not self.scene.movable_bones:
+            return ""
+        return self._core.bone_coordinates if self.method == "emu" else "joint coordinates"
 
     def structures(self) -> dict:
         """{name: bytes} of what this solver built for its scene (per-solve work

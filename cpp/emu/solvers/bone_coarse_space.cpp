@@ -13,7 +13,7 @@ BoneCoarseSpace::BoneCoarseSpace(const UnknownLayout& layout, double alpha, std:
     : layout_(layout), alpha_(alpha), follow_(std::move(follow)) {}
 
 void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& product,
-                            const std::vector<Mat9X>& extra) {
+                            const std::vector<Mat9X>& extra, const Eigen::MatrixXd* turn_map) {
   const int nb = layout_.num_bones, nu = layout_.num_unknowns, nz = 3 * nb + static_cast<int>(extra.size());
   if (static_cast<int>(follow_.size()) != nb)
     throw std::logic_error("BoneCoarseSpace: one follow field per movable bone expected");
@@ -46,7 +46,15 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
   for (int j = 0; j < nz; ++j) HZ_.col(j) = flat(HZ[j]);
   Zx_.resize(entries, nz - 3 * nb);  // the recycled directions; the turns are M_bk Phi_b
   for (int j = 3 * nb; j < nz; ++j) Zx_.col(j - 3 * nb) = flat(Z[j]);
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (E + E.transpose()));
+  // In the coarse coordinates: the bones' turns (or the turn map's
+  // combinations of them) and the recycled directions, Zc = Z Tc.
+  const int nt = turn_map ? static_cast<int>(turn_map->cols()) : 3 * nb, nc = nt + nz - 3 * nb;
+  Eigen::MatrixXd Tc = Eigen::MatrixXd::Zero(nz, nc);
+  if (turn_map) Tc.topLeftCorner(3 * nb, nt) = *turn_map;
+  else Tc.topLeftCorner(3 * nb, nt).setIdentity();
+  Tc.bottomRightCorner(nz - 3 * nb, nc - nt).setIdentity();
+  const Eigen::MatrixXd Ec = turn_map ? Eigen::MatrixXd(Tc.transpose() * E * Tc) : E;
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (Ec + Ec.transpose()));
   double scale = std::numeric_limits<double>::infinity();
   for (int u = layout_.num_soft; u < nu; ++u) {
     double vol = 0;
@@ -54,23 +62,25 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
       vol += layout_.geometry.volume(layout_.unknown_tets[i]);
     scale = std::min(scale, 2.0 * alpha_ * vol);
   }
-  inv_.setZero(nz, nz);
+  Eigen::MatrixXd inv = Eigen::MatrixXd::Zero(nc, nc);
   neutral_.clear();
   balancing_ = true;
-  for (int i = 0; i < nz; ++i) {
-    const Eigen::VectorXd v = es.eigenvectors().col(i);
+  for (int i = 0; i < nc; ++i) {
+    const Eigen::VectorXd vc = es.eigenvectors().col(i);
     if (es.eigenvalues()(i) > 1e-9 * scale) {
-      inv_ += v * v.transpose() / es.eigenvalues()(i);
+      inv += vc * vc.transpose() / es.eigenvalues()(i);
       continue;
     }
     balancing_ = false;
     if (es.eigenvalues()(i) < -1e-9 * scale) continue;  // negative curvature: not a neutral mode
-    if (v.head(3 * nb).norm() < 0.5) continue;            // mostly a recycled direction: not a bone's mode
+    const Eigen::VectorXd v = turn_map ? Eigen::VectorXd(Tc * vc) : vc;  // as the bones' world turns
+    if (v.head(3 * nb).norm() < 0.5 * v.norm()) continue;  // mostly a recycled direction: not a bone's mode
     int best = 0;
     for (int b = 1; b < nb; ++b)
       if (v.segment<3>(3 * b).norm() > v.segment<3>(3 * best).norm()) best = b;
     neutral_.push_back({best, v.segment<3>(3 * best).normalized()});
   }
+  inv_ = turn_map ? Eigen::MatrixXd(Tc * inv * Tc.transpose()) : inv;
   built_ = true;
 }
 

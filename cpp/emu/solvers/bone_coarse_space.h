@@ -55,7 +55,12 @@ class BoneCoarseSpace {
   /// Rebuild at F (9 x #unknowns; bone columns rotations) with H's product;
   /// `extra` directions (9 x #unknowns each, bone columns tangent at F: the
   /// recycled directions of earlier CG solves) join the 3 turns per bone.
-  void build(const Mat9X& F, const Turn& turn, const Product& product, const std::vector<Mat9X>& extra = {});
+  /// turn_map (3 #bones by n; nullptr: none): the coarse turns are its columns'
+  /// combinations of the bones' world turns (joint coordinates, joint_coordinates.h:
+  /// a joint turns its whole subtree), and turn's HZ must be of a Hessian that
+  /// is exact on those combinations.
+  void build(const Mat9X& F, const Turn& turn, const Product& product, const std::vector<Mat9X>& extra = {},
+             const Eigen::MatrixXd* turn_map = nullptr);
   bool built() const { return built_; }
 
   /// out = M^-1 in around the base inverse base(in, out) (tangent-projected).

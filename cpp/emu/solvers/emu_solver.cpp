@@ -51,6 +51,7 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
   factor_seconds_ = seconds_since(t0);
   build_preconditioner();
   tet_energy_.resize(model_.tets.rows());
+  if (layout_.num_bones) set_bone_coordinates();
   if (layout_.num_bones && emu_.bone_coarse_space) {  // setup: counted with the factorisations
     t0 = Clock::now();
     turn_fits_ = std::make_unique<BoneTurnFits>(layout_, *jacobian_);
@@ -60,6 +61,19 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
     LoadCase rest;
     rest.activation = Eigen::VectorXd::Zero(model_.num_muscles);
     rest_gradient_per_alpha_ = cold_gradient_norm(make_context(rest)) / emu_.alpha;
+  }
+}
+
+void EmuSolver::set_bone_coordinates() {
+  if (!emu_.joint_coordinates) {
+    bone_coordinates_ = "per bone: joint_coordinates is off";
+    return;
+  }
+  try {
+    joints_ = std::make_unique<JointCoordinates>(BoneForest(layout_, bbox_diagonal(model_.rest)), layout_.num_soft);
+    bone_coordinates_ = "joint coordinates";
+  } catch (const std::invalid_argument& e) {  // a loop or weld: the fit's joint rows hold it
+    bone_coordinates_ = std::string("per bone: ") + e.what();
   }
 }
 
@@ -153,17 +167,31 @@ void EmuSolver::fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, 
 void EmuSolver::fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const { jacobian_->apply(D, dx, Fd); }
 
 void EmuSolver::project_tangent(const Mat9X& F, Mat9X& v) const {
-  bone_rotations::project_tangent(F, layout_.num_soft, v);
+  if (joints_) joints_->project(F, v);
+  else bone_rotations::project_tangent(F, layout_.num_soft, v);
 }
 
 void EmuSolver::retract(const Mat9X& F, const Mat9X& d, double s, Mat9X& out) const {
-  bone_rotations::retract(F, d, s, layout_.num_soft, out);
+  if (joints_) joints_->retract(F, d, s, out);
+  else bone_rotations::retract(F, d, s, layout_.num_soft, out);
 }
 
 void EmuSolver::riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                                    bool curvature, Mat9X& out) const {
   hessian_product_into(A, v, out);
-  bone_rotations::riemannian_columns(F, g, v, curvature, layout_.num_soft, model_.bone_stiffness, out);
+  riemannian_bone_columns(F, g, v, curvature, out);
+}
+
+void EmuSolver::riemannian_bone_columns(const Mat9X& F, const Mat9X& g, const Mat9X& v, bool curvature,
+                                        Mat9X& out) const {
+  if (!joints_) {
+    bone_rotations::riemannian_columns(F, g, v, curvature, layout_.num_soft, model_.bone_stiffness, out);
+    return;
+  }
+  // In joint coordinates the whole rotation term (SO(3)'s, the chain's, the
+  // springs' through g) is one small matrix, clamped PSD for the filtered model.
+  joints_->project(F, out);
+  joints_->add_rotation_product(F, joints_->rotation_term(F, g, !curvature), v, out);
 }
 
 double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
@@ -326,7 +354,8 @@ double EmuSolver::gradient_floor(const Context& c) const {
 }
 
 double EmuSolver::cold_gradient_norm(const Context& c) const {
-  const Mat9X F = start_unknowns(nullptr);
+  Mat9X F = start_unknowns(nullptr);
+  if (joints_) joints_->project_onto_joints(F, c.h);
   Eigen::MatrixX3d x;
   Mat9X Fx, g;
   fit_into(c, F, x, Fx);
@@ -553,6 +582,7 @@ class EmuSolver::Newton {
 
   template <class Product>
   void build_coarse_space(const std::vector<Mat9>& H, bool exact, const Product& product) {
+    const Eigen::MatrixXd turn_map = s_.joints_ ? s_.joints_->turn_map(F_) : Eigen::MatrixXd();
     coarse_.build(
         F_,
         [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
@@ -561,11 +591,10 @@ class EmuSolver::Newton {
           for (int k = 0; k < 3; ++k) {
             if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
             else
-              bone_rotations::riemannian_columns(F_, g_, Z[k], exact, s_.layout_.num_soft, s_.model_.bone_stiffness,
-                                                 HZ[k]);
+              s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
           }
         },
-        product, recycled_);
+        product, recycled_, s_.joints_ ? &turn_map : nullptr);
   }
 
   // d_ by the step's kind: the preconditioner's step (Woodbury), L-BFGS on it,
@@ -719,7 +748,9 @@ class EmuSolver::Newton {
 SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   const auto t0 = Clock::now();
   const Context c = make_context(load);
-  Newton newton(*this, c, start_unknowns(F0));
+  Mat9X start = start_unknowns(F0);
+  if (joints_) joints_->project_onto_joints(start, c.h);
+  Newton newton(*this, c, std::move(start));
   SolveResult res;
   // A warm start's step-test gate on the cold start's scale (newton_minimize);
   // without contact (its terms need not be defined at rest under these pins).

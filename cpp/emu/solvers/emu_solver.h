@@ -34,6 +34,7 @@
 #include "emu/solvers/block_preconditioner.h"
 #include "emu/solvers/bone_turn_fits.h"
 #include "emu/solvers/fit_jacobian.h"
+#include "emu/solvers/joint_coordinates.h"
 #include "emu/solvers/newton/result.h"
 #include "emu/solvers/solver_options.h"
 
@@ -81,6 +82,9 @@ class EmuSolver {
   int num_unknowns() const { return layout_.num_unknowns; }
   /// The F unknown each tet of model() uses (#T; see UnknownLayout).
   const Eigen::VectorXi& tet_unknown() const { return layout_.tet_unknown; }
+  /// How movable bones turn: "joint coordinates", "per bone: <why>" (a loop
+  /// or weld of joints, or EmuOptions::joint_coordinates off), "" without bones.
+  const std::string& bone_coordinates() const { return bone_coordinates_; }
 
  private:
   struct Context {  // per-load data: activations, pinned share of F, joint targets, gravity terms
@@ -124,12 +128,18 @@ class EmuSolver {
   void hessian_product_from_fit(const std::vector<Mat9>& A, const Mat9X& v, const Mat9X& Fd, Mat9X& out) const;
   void fit_into(const Context& c, const Mat9X& F, Eigen::MatrixX3d& x, Mat9X& Fx) const;
   void fit_linear_into(const Mat9X& D, Eigen::MatrixX3d& dx, Mat9X& Fd) const;
-  // Bones on SO(3) (bone_rotations.h): tangent projection of v's bone columns
-  // at F; F + s d retracted to rotations; the Riemannian Hessian product.
+  // Bones on SO(3) (bone_rotations.h), in joint coordinates where the joints
+  // form a forest (joint_coordinates.h): projection of v's bone columns onto
+  // the tangents at F; F + s d retracted to rotations; the Riemannian Hessian
+  // product (with the chain's curvature where `curvature`).
   void project_tangent(const Mat9X& F, Mat9X& v) const;
   void retract(const Mat9X& F, const Mat9X& d, double s, Mat9X& out) const;
   void riemannian_product(const std::vector<Mat9>& A, const Mat9X& F, const Mat9X& g, const Mat9X& v,
                           bool curvature, Mat9X& out) const;
+  /// out's bone columns (holding the Euclidean H v) made the Riemannian product's.
+  void riemannian_bone_columns(const Mat9X& F, const Mat9X& g, const Mat9X& v, bool curvature, Mat9X& out) const;
+  /// Setup: joint coordinates where the movable bones' joints form a forest.
+  void set_bone_coordinates();
   Mat9X to_cols(const Eigen::MatrixXd& rows) const;
   // Contact on the fitted positions x = x*(F) (its chain rule: fit_jacobian.h).
   bool has_contact() const { return contact_.active(); }
@@ -155,6 +165,8 @@ class EmuSolver {
   double rest_gradient_per_alpha_ = 0;
   mutable std::vector<double> tet_energy_;
   std::unique_ptr<BoneTurnFits> turn_fits_;  // movable bones with the coarse space, else empty
+  std::unique_ptr<JointCoordinates> joints_;  // movable bones in a forest of joints, else per-bone rotations
+  std::string bone_coordinates_;
 };
 
 }  // namespace emu

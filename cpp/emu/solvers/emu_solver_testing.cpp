@@ -55,6 +55,36 @@ Eigen::MatrixXd EmuSolverTesting::hessian_product(const EmuSolver& s, const Load
   return out.transpose();
 }
 
+Eigen::MatrixXd EmuSolverTesting::riemannian_hessian_product(const EmuSolver& s, const LoadCase& load,
+                                                             const Eigen::MatrixXd& Frows,
+                                                             const Eigen::MatrixXd& Vrows, bool exact) {
+  const EmuSolver::Context c = s.make_context(load);
+  std::vector<Mat9> A, A_exact;
+  const Mat9X F = s.to_cols(Frows);
+  Mat9X V = s.to_cols(Vrows), x_F, g, out;
+  s.project_tangent(F, V);
+  s.blocks_into(c, F, &A, &A_exact);
+  Eigen::MatrixX3d x;
+  s.fit_into(c, F, x, x_F);
+  s.gradient_into(c, F, x_F, g);
+  s.riemannian_product(exact ? A_exact : A, F, g, V, exact, out);
+  return out.transpose();
+}
+
+Eigen::MatrixXd EmuSolverTesting::project_tangent(const EmuSolver& s, const Eigen::MatrixXd& Frows,
+                                                  const Eigen::MatrixXd& Vrows) {
+  Mat9X V = s.to_cols(Vrows);
+  s.project_tangent(s.to_cols(Frows), V);
+  return V.transpose();
+}
+
+Eigen::MatrixXd EmuSolverTesting::retract(const EmuSolver& s, const Eigen::MatrixXd& Frows,
+                                          const Eigen::MatrixXd& Drows, double step) {
+  Mat9X out;
+  s.retract(s.to_cols(Frows), s.to_cols(Drows), step, out);
+  return out.transpose();
+}
+
 Eigen::MatrixXd EmuSolverTesting::block_hessians(const EmuSolver& s, const LoadCase& load,
                                                  const Eigen::MatrixXd& Frows, bool exact) {
   const EmuSolver::Context c = s.make_context(load);

@@ -24,6 +24,17 @@ struct EmuSolverTesting {
   /// (with contact, plus J^T H_c J V: the contact Hessian as the term gives it).
   static Eigen::MatrixXd hessian_product(const EmuSolver& s, const LoadCase& load, const Eigen::MatrixXd& F,
                                          const Eigen::MatrixXd& V, bool exact = false);
+  /// The Riemannian Hessian times V as Newton-Krylov's CG applies it (bones on
+  /// SO(3), in joint coordinates where the solver uses them: V projected, the
+  /// chain's curvature with exact = true); no contact.
+  static Eigen::MatrixXd riemannian_hessian_product(const EmuSolver& s, const LoadCase& load,
+                                                    const Eigen::MatrixXd& F, const Eigen::MatrixXd& V,
+                                                    bool exact = false);
+  /// V's bone rows projected onto the tangents at F (joint-consistent ones in joint coordinates).
+  static Eigen::MatrixXd project_tangent(const EmuSolver& s, const Eigen::MatrixXd& F, const Eigen::MatrixXd& V);
+  /// F moved by step D: the solver's retraction (bones kept rotations and, in joint coordinates, on their joints).
+  static Eigen::MatrixXd retract(const EmuSolver& s, const Eigen::MatrixXd& F, const Eigen::MatrixXd& D,
+                                 double step);
   /// Blocks A_u, #unknowns by 81 (column-major 9x9 per row); filtered unless exact.
   static Eigen::MatrixXd block_hessians(const EmuSolver& s, const LoadCase& load, const Eigen::MatrixXd& F,
                                         bool exact = false);

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <utility>
 #include <stdexcept>
 #include <string>
@@ -17,7 +16,12 @@ namespace emu {
 
 RigidBones::RigidBones(const Model& model, const UnknownLayout& layout)
     : model_(model), layout_(layout), diag_(bbox_diagonal(model.rest)), bones_(layout.num_bones) {
-  build_forest();
+  const BoneForest forest(layout, diag_);
+  order_ = forest.order;
+  for (int b = 0; b < layout.num_bones; ++b) {
+    static_cast<BoneForest::Node&>(bones_[b]) = forest.bones[b];
+    bones_[b].dofs = bones_[b].kind == Kind::Free ? 6 : bones_[b].kind == Kind::Ball ? 3 : 1;
+  }
   for (Eigen::Index t = 0; t < model.tets.rows() && layout.num_bones; ++t) {
     if (layout.is_bone_tet(t)) continue;
     for (int a = 0; a < 4; ++a)
@@ -29,96 +33,8 @@ RigidBones::RigidBones(const Model& model, const UnknownLayout& layout)
   for (Eigen::Index v = 0; v < model.rest.rows(); ++v)
     if (layout.vertex_bone(v) >= 0) bones_[layout.vertex_bone(v)].vertices.push_back(static_cast<int>(v));
   for (int b = 0; b < layout.num_bones; ++b) {
-    set_kind(b);
     bones_[b].offset = dofs_;
     dofs_ += bones_[b].dofs;
-  }
-}
-
-void RigidBones::build_forest() {
-  const int nb = size();
-  // Joint points per bone with the world, and per pair of movable bones.
-  std::vector<std::vector<int>> world(nb);
-  std::map<std::pair<int, int>, std::vector<int>> links;
-  for (size_t i = 0; i < layout_.joints.size(); ++i) {
-    const JointPoint& j = layout_.joints[i];
-    if (j.other < 0) world[j.bone].push_back(static_cast<int>(i));
-    else links[{std::min(j.bone, j.other), std::max(j.bone, j.other)}].push_back(static_cast<int>(i));
-  }
-  std::vector<std::vector<int>> neighbours(nb);
-  for (const auto& link : links) {
-    neighbours[link.first.first].push_back(link.first.second);
-    neighbours[link.first.second].push_back(link.first.first);
-  }
-  // Roots: the bones the world holds, then (a piece nothing holds) its lowest
-  // bone, free; every other bone hangs from the bone that reached it first.
-  std::vector<char> seen(nb, 0);
-  for (int b = 0; b < nb; ++b)
-    if (!world[b].empty()) {
-      seen[b] = 1;
-      bones_[b].anchors = world[b];
-    }
-  auto grow = [&](int root) {
-    size_t head = order_.size();
-    order_.push_back(root);
-    while (head < order_.size()) {
-      const int u = order_[head++];
-      for (int w : neighbours[u]) {
-        if (w == bones_[u].parent) continue;
-        if (seen[w])
-          throw std::invalid_argument("movable bones " + std::to_string(u) + " and " + std::to_string(w) +
-                                      " close a loop of joints (through each other, pinned vertices or fixed "
-                                      "bones); the FEM solver needs the bones' joints to form a tree: fix a bone "
-                                      "of the loop or remove a joint");
-        seen[w] = 1;
-        bones_[w].parent = u;
-        bones_[w].anchors = links[{std::min(u, w), std::max(u, w)}];
-        order_.push_back(w);
-      }
-    }
-  };
-  for (int b = 0; b < nb; ++b)
-    if (!world[b].empty()) grow(b);
-  for (int b = 0; b < nb; ++b)
-    if (!seen[b]) {
-      seen[b] = 1;
-      grow(b);
-    }
-  for (int b : order_) {
-    Bone& B = bones_[b];
-    if (B.parent >= 0) B.chain = bones_[B.parent].chain;
-    B.chain.push_back(b);
-    for (int a : B.chain) bones_[a].below.push_back(b);
-  }
-}
-
-void RigidBones::set_kind(int b) {
-  Bone& B = bones_[b];
-  if (B.anchors.empty()) {
-    B.kind = Kind::Free;
-    B.dofs = 6;
-    B.P = layout_.bone_center.row(b).transpose();
-    return;
-  }
-  const Vec3 X0 = layout_.joints[B.anchors[0]].rest;
-  for (size_t i = 1; i < B.anchors.size(); ++i)
-    if (B.axis_end < 0 && (layout_.joints[B.anchors[i]].rest - X0).norm() > 1e-9 * diag_)
-      B.axis_end = static_cast<int>(i);
-  B.kind = B.axis_end < 0 ? Kind::Ball : Kind::Hinge;
-  B.dofs = B.axis_end < 0 ? 3 : 1;
-  B.P = X0;
-  if (B.axis_end < 0) return;
-  const Vec3 a = (layout_.joints[B.anchors[B.axis_end]].rest - X0).normalized();
-  B.rest_axis = a;
-  for (int i : B.anchors) {
-    const Vec3 r = layout_.joints[i].rest - X0;
-    if ((r - r.dot(a) * a).norm() <= 1e-6 * diag_) continue;
-    if (B.parent >= 0)
-      throw std::invalid_argument("movable bones " + std::to_string(B.parent) + " and " + std::to_string(b) +
-                                  " are welded: the points they share are not on one line; make them one bone");
-    throw std::invalid_argument("movable bone " + std::to_string(b) +
-                                " is welded: its joints with pinned vertices or fixed bones are not on "
-                                "one line; fix the bone instead");
   }
 }
 

@@ -34,6 +34,7 @@
 
 #include "emu/energy/types.h"
 #include "emu/model/unknown_layout.h"
+#include "emu/solvers/bone_forest.h"
 #include "emu/solvers/newton/result.h"
 
 namespace emu {
@@ -99,18 +100,10 @@ class RigidBones {
                    Eigen::VectorXd& db, std::vector<NeutralMode>& neutral) const;
 
  private:
-  enum class Kind { Free, Ball, Hinge };
-  struct Bone {
-    Kind kind = Kind::Free;
+  using Kind = BoneForest::Kind;
+  struct Bone : BoneForest::Node {  // the forest's node (bone_forest.h) and FEM's unknowns
     int offset = 0, dofs = 6;
-    int parent = -1;            // the bone it hangs from (-1: a root)
-    int axis_end = -1;          // hinge: the anchor that spans the axis with the pivot
-    Vec3 P = Vec3::Zero();      // rest pivot
-    Vec3 rest_axis = Vec3::UnitX();  // hinge: the axis at rest
     std::vector<int> vertices;  // non-pinned vertices placed by the bone
-    std::vector<int> anchors;   // the layout's joint points with its parent (or the world)
-    std::vector<int> chain;     // its ancestors and itself, root first
-    std::vector<int> below;     // itself and its descendants
   };
   /// 3 x dofs(): the Jacobian of a vertex of bone b at current position x,
   /// written into J (columns of bones outside b's chain zero).
@@ -118,8 +111,6 @@ class RigidBones {
                        Eigen::Matrix<double, 3, Eigen::Dynamic>& J) const;
   /// The turn axes of bone b at poses, as columns (ball and free: I; hinge: its axis).
   Eigen::Matrix<double, 3, Eigen::Dynamic> axes(int b, const BonePoses& poses) const;
-  void build_forest();
-  void set_kind(int b);
   /// Adds the rotation's second-order term and the joint springs' Hessian to Hbb.
   void add_rotation_term(const BonePoses& poses, const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& f, bool exact,
                          Eigen::MatrixXd& Hbb) const;
