@@ -41,4 +41,15 @@ SCENES = {
     "arm_r9": lambda: (emu.scenes.arm(9), {"flexor": 0.45}, True),
     "neck_r2": lambda: (emu.scenes.neck(2), {"left_front": 0.5}, True),
     "realistic_biceps": lambda: (_research("realistic_biceps", ["forearm"]), {"biceps": 2e3}, False),
+    # the paper's first figure as a chain: the scapula fixed, humerus (ball joint, a shoulder spring) and
+    # forearm (elbow hinge) both moved by the biceps
+    "realistic_biceps_chain": lambda: (_chain_biceps(), {"biceps": 2e3}, False),
+    "upper_limb_r2": lambda: (emu.anatomy.upper_limb(2), {"biceps": 0.4}, True),
+    "leg_r2": lambda: (emu.anatomy.leg(2), {"hamstring": 0.4}, True),
 }
+
+
+def _chain_biceps(shoulder_stiffness=1e4):
+    s = _research("realistic_biceps", ["humerus", "forearm"])
+    s.parts["humerus"].joint_stiffness = shoulder_stiffness
+    return s

@@ -90,7 +90,8 @@ def child(a) -> None:
         print(json.dumps(out))
         return
     t0 = time.perf_counter()
-    solver = emu.Solver(scene, **METHODS[a.method], accuracy=a.accuracy)
+    options = dict(map(emu.options.parse_option, a.emu_option)) if a.method == "emu" else {}
+    solver = emu.Solver(scene, **METHODS[a.method], accuracy=a.accuracy, **options)
     setup = time.perf_counter() - t0
     frame_s, positions, prev, parts = [], [], None, []
     for f in frames:
@@ -137,6 +138,8 @@ def main(argv=None):
     ap.add_argument("--accuracy", type=float, nargs="*", default=[0.01])
     ap.add_argument("--frames", type=int, default=0, help="sequences of this many frames (0: single solves)")
     ap.add_argument("--hindsight", action="store_true", help="EMU's hindsight bound (single solves)")
+    ap.add_argument("--emu-option", action="append", default=[], metavar="NAME=VALUE",
+                    help="an option for EMU's runs (e.g. joint_coordinates=False), as `emu run -O` takes it")
     ap.add_argument("--out", default=os.path.join(HERE, "shipped"))
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--scene", help=argparse.SUPPRESS)
@@ -177,7 +180,7 @@ def main(argv=None):
                     for m in METHODS:
                         path = os.path.join(tmp, f"{name}_{m}.npy")
                         r = run_child([*common, "--method", m, "--threads", threads, "--accuracy", accuracy,
-                                       "--positions", path])
+                                       "--positions", path, *[f"--emu-option={o}" for o in a.emu_option]])
                         if "failed" not in r:
                             r["errors"] = errors_to(reference, np.load(path))
                             fs = r["frame_s"]

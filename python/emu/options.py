@@ -125,9 +125,10 @@ _TABLE = [
     Option("bone_coarse_space", bool, True, "emu", ("emu",),
            "with movable bones: a coarse correction for the bones' turns in the preconditioner"),
     Option("joint_coordinates", bool, True, "emu", ("emu",),
-           "with movable bones: turn them in joint coordinates (a bone's turn the sum of its chain's joint "
-           "turns), so steps keep hinges between moving bones exactly; scenes whose joints close a loop or "
-           "weld two bones turn each bone on its own (``Solver.bone_coordinates`` says which)"),
+           "where a hinge joins two movable bones (a chain): turn the bones in joint coordinates (a bone's "
+           "turn the sum of its chain's joint turns), so steps keep that hinge exactly; other scenes, and "
+           "joints that close a loop or weld two bones, turn each bone on its own (``Solver.bone_coordinates`` "
+           "says which)"),
     Option("recycled_directions", int, 4, "emu", ("emu",),
            "with movable bones: keep the directions of up to this many long CG solves in that correction "
            "(0: off)"),

@@ -486,10 +486,10 @@ class Solver:
     @property
     def bone_coordinates(self) -> str:
         """How this solver turns movable bones: "joint coordinates" (each
-        bone's turn the sum of its chain's joint turns; FEM always, EMU where
-        the joints form trees) or, for EMU, "per bone: <why>" (joints that close
-        a loop or weld two bones, or ``joint_coordinates=False``); "" without
-        movable bones."""
+        bone's turn the sum of its chain's joint turns; FEM always, EMU where a
+        hinge joins two movable bones) or, for EMU, "per bone: <why>" (no such
+        hinge, joints that close a loop or weld two bones, or
+        ``joint_coordinates=False``); "" without movable bones."""
         if not self.scene.movable_bones:
             return ""
         return self._core.bone_coordinates if self.method == "emu" else "joint coordinates"

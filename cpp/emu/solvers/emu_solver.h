@@ -82,8 +82,9 @@ class EmuSolver {
   int num_unknowns() const { return layout_.num_unknowns; }
   /// The F unknown each tet of model() uses (#T; see UnknownLayout).
   const Eigen::VectorXi& tet_unknown() const { return layout_.tet_unknown; }
-  /// How movable bones turn: "joint coordinates", "per bone: <why>" (a loop
-  /// or weld of joints, or EmuOptions::joint_coordinates off), "" without bones.
+  /// How movable bones turn: "joint coordinates" (a hinge joins two movable
+  /// bones), "per bone: <why>" (no such hinge, a loop or weld of joints, or
+  /// EmuOptions::joint_coordinates off), "" without bones.
   const std::string& bone_coordinates() const { return bone_coordinates_; }
 
  private:

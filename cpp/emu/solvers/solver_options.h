@@ -85,8 +85,9 @@ struct EmuOptions {
   EmuPreconditioner preconditioner = EmuPreconditioner::ConstantSchur;
   int preconditioner_refresh = 3;  // Newton-Krylov: rebuild the Woodbury preconditioner every n steps
   bool bone_coarse_space = true;   // movable bones: add the bone-rotation coarse correction (see emu_solver.cpp)
-  // Movable bones in joint coordinates over the bone forest (joint_coordinates.h);
-  // a scene whose joints close a loop or weld two bones keeps per-bone rotations
+  // Movable bones in joint coordinates over the bone forest (joint_coordinates.h)
+  // where a hinge joins two movable bones; other scenes, and those whose joints
+  // close a loop or weld two bones, keep per-bone rotations
   bool joint_coordinates = true;
   // Movable bones: directions of CG solves far longer than the last one kept
   // in the coarse space of later steps, at most this many (0: off)
