@@ -127,7 +127,9 @@ std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
     // H Z (3 turns per bone and the recycled directions, at most) and the
     // recycled directions' columns of Z over all unknowns, rebuilt every
     // Newton step; Z's turns are the unit-turn fits' follow fields, below
-    const double vectors = 3.0 * layout_.num_bones + 2.0 * emu_.recycled_directions;
+    // (and in joint coordinates each joint turn's smoothed direction, its column and H of it)
+    const double vectors =
+        3.0 * layout_.num_bones + 2.0 * emu_.recycled_directions + (joints_ ? 2.0 * joints_->size() : 0.0);
     out.emplace_back("movable bones and their coarse space", vectors * 9.0 * layout_.num_unknowns * 8);
     out.emplace_back("bones' unit-turn fits", turn_fits_->bytes());
   }
@@ -605,7 +607,38 @@ class EmuSolver::Newton {
               s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
           }
         },
-        product, recycled_, s_.joints_ ? &turn_map : nullptr);
+        product, coarse_extra(H, turn_map, product), s_.joints_ ? &turn_map : nullptr);
+  }
+
+  // The recycled directions and, in joint coordinates, each joint's turn
+  // smoothed once by the base preconditioner, z - B H z (rebuilt with H every
+  // step): the coarse turns' soft tissue follows as the fit places it, stiffer
+  // than the material lets it follow, and without the smoothed turns CG's
+  // truncated steps are short along a chain's soft turns while the answer is
+  // still far (docs/DESIGN.md, "Chains of bones in EMU").
+  template <class Product>
+  std::vector<Mat9X> coarse_extra(const std::vector<Mat9>& H, const Eigen::MatrixXd& turn_map,
+                                  const Product& product) {
+    std::vector<Mat9X> extra = recycled_;
+    if (!s_.joints_) return extra;
+    const int nb = s_.layout_.num_bones;
+    std::vector<Mat9X> Zb(3 * nb);
+    for (int b = 0; b < nb; ++b) {
+      std::array<Mat3, 3> M;
+      for (int k = 0; k < 3; ++k) M[k] = cross_matrix(Vec3::Unit(k)) * unflatten(F_.col(s_.layout_.num_soft + b));
+      std::array<Mat9X, 3> Z, HZ;
+      s_.turn_fits_->turns<3>(H, b, M, s_.emu_.alpha, s_.acap_->weight_volume(), Z, HZ);
+      for (int k = 0; k < 3; ++k) Zb[3 * b + k] = std::move(Z[k]);
+    }
+    for (Eigen::Index j = 0; j < turn_map.cols(); ++j) {
+      Mat9X z = Mat9X::Zero(9, s_.layout_.num_unknowns), Hz, BHz;
+      for (int i = 0; i < 3 * nb; ++i)
+        if (turn_map(i, j) != 0.0) z += turn_map(i, j) * Zb[i];
+      product(z, Hz);
+      s_.base_precondition(F_, Hz, BHz);
+      extra.push_back(z - BHz);
+    }
+    return extra;
   }
 
   // d_ by the step's kind: the preconditioner's step (Woodbury), L-BFGS on it,
