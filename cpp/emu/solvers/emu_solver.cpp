@@ -607,7 +607,7 @@ class EmuSolver::Newton {
               s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
           }
         },
-        product, coarse_extra(H, turn_map, product), s_.joints_ ? &turn_map : nullptr);
+        product, coarse_extra(H, exact, turn_map), s_.joints_ ? &turn_map : nullptr);
   }
 
   // The recycled directions and, in joint coordinates, each joint's turn
@@ -616,27 +616,32 @@ class EmuSolver::Newton {
   // than the material lets it follow, and without the smoothed turns CG's
   // truncated steps are short along a chain's soft turns while the answer is
   // still far (docs/DESIGN.md, "Chains of bones in EMU").
-  template <class Product>
-  std::vector<Mat9X> coarse_extra(const std::vector<Mat9>& H, const Eigen::MatrixXd& turn_map,
-                                  const Product& product) {
+  std::vector<Mat9X> coarse_extra(const std::vector<Mat9>& H, bool exact, const Eigen::MatrixXd& turn_map) {
     std::vector<Mat9X> extra = recycled_;
     if (!s_.joints_) return extra;
-    const int nb = s_.layout_.num_bones;
-    std::vector<Mat9X> Zb(3 * nb);
+    const int nb = s_.layout_.num_bones, nu = s_.layout_.num_unknowns;
+    // the joint turns z = Z T and H z = (H Z) T from the bones' turns (their fits made at setup)
+    std::vector<Mat9X> z(turn_map.cols(), Mat9X::Zero(9, nu)), Hz(turn_map.cols(), Mat9X::Zero(9, nu));
     for (int b = 0; b < nb; ++b) {
       std::array<Mat3, 3> M;
       for (int k = 0; k < 3; ++k) M[k] = cross_matrix(Vec3::Unit(k)) * unflatten(F_.col(s_.layout_.num_soft + b));
       std::array<Mat9X, 3> Z, HZ;
       s_.turn_fits_->turns<3>(H, b, M, s_.emu_.alpha, s_.acap_->weight_volume(), Z, HZ);
-      for (int k = 0; k < 3; ++k) Zb[3 * b + k] = std::move(Z[k]);
+      for (int k = 0; k < 3; ++k) {
+        if (s_.has_contact() && Hc_.nonZeros()) hessian_product(H, exact, Z[k], HZ[k]);
+        else s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
+        for (Eigen::Index j = 0; j < turn_map.cols(); ++j) {
+          const double t = turn_map(3 * b + k, j);
+          if (t == 0.0) continue;
+          z[j] += t * Z[k];
+          Hz[j] += t * HZ[k];
+        }
+      }
     }
+    Mat9X BHz;
     for (Eigen::Index j = 0; j < turn_map.cols(); ++j) {
-      Mat9X z = Mat9X::Zero(9, s_.layout_.num_unknowns), Hz, BHz;
-      for (int i = 0; i < 3 * nb; ++i)
-        if (turn_map(i, j) != 0.0) z += turn_map(i, j) * Zb[i];
-      product(z, Hz);
-      s_.base_precondition(F_, Hz, BHz);
-      extra.push_back(z - BHz);
+      s_.base_precondition(F_, Hz[j], BHz);
+      extra.push_back(z[j] - BHz);
     }
     return extra;
   }
