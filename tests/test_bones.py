@@ -695,3 +695,23 @@ def test_emu_loop_of_joints_keeps_per_bone_rotations_and_says_so():
     assert solver.bone_coordinates.startswith("per bone: ") and "loop" in solver.bone_coordinates
     sol = solver.solve({"m": 0.3}, normalized=True)
     assert sol.converged and sol.settings["bone_coordinates"] == solver.bone_coordinates
+
+
+def test_fem_at_its_iteration_cap_names_a_weakly_resisted_turn():
+    """The authors' biceps as a chain with a weak shoulder spring: strict FEM
+    crawls along the humerus' nearly free turn; a solve that runs out of
+    iterations says which bone's turn is nearly neutral, how weakly it is
+    resisted, and what settles it. With a firm spring it converges and says
+    nothing of the kind."""
+    from conftest import shared_raw
+
+    shared_raw()
+    s = emu.io.load_scene(emu.datasets.path("realistic_biceps"), free_bones=["humerus", "forearm"], warn=False)
+    s.parts["humerus"].joint_stiffness = 1.0
+    sol = emu.solve(s, {"biceps": 2e3}, "fem", rtol_grad=1e-10, max_iterations=40)
+    assert not sol.converged
+    assert "the turn of movable bone 'humerus'" in sol.status and "near-neutral" in sol.status, sol.status
+    assert "joint_stiffness" in sol.status
+    s.parts["humerus"].joint_stiffness = 1e4
+    firm = emu.solve(s, {"biceps": 2e3}, "fem", rtol_grad=1e-10, max_iterations=40)
+    assert "near-neutral" not in firm.status, firm.status

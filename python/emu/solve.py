@@ -356,11 +356,14 @@ class Solver:
         try:
             return make(*args)
         except ValueError as e:
-            names = self.scene.movable_bones
-            text = re.sub(r"movable bones (\d+) and (\d+)",
-                          lambda m: f"movable bones '{names[int(m[1])]}' and '{names[int(m[2])]}'", str(e))
-            text = re.sub(r"movable bone (\d+)", lambda m: f"movable bone '{names[int(m[1])]}'", text)
-            raise ValueError(text) from None
+            raise ValueError(self._bone_names(str(e))) from None
+
+    def _bone_names(self, text: str) -> str:
+        """text with the C++ core's movable-bone numbers replaced by the bones' names."""
+        names = self.scene.movable_bones
+        text = re.sub(r"movable bones (\d+) and (\d+)",
+                      lambda m: f"movable bones '{names[int(m[1])]}' and '{names[int(m[2])]}'", text)
+        return re.sub(r"movable bone (\d+)", lambda m: f"movable bone '{names[int(m[1])]}'", text)
 
     def activation_vector(self, activation=None, normalized: bool = False) -> np.ndarray:
         """Per-muscle absolute activations from a {muscle: value} dict (missing: 0)."""
@@ -492,7 +495,7 @@ class Solver:
         ``joint_coordinates=False``); "" without movable bones."""
         if not self.scene.movable_bones:
             return ""
-        return self._core.bone_coordinates if self.method == "emu" else "joint coordinates"
+        return self._bone_names(self._core.bone_coordinates) if self.method == "emu" else "joint coordinates"
 
     def structures(self) -> dict:
         """{name: bytes} of what this solver built for its scene (per-solve work
@@ -585,7 +588,7 @@ class Solver:
         estimate = None if x1 is None else vertex_error(positions, x1)
         history["time_s"] = history["time_s"] + time_offset
         return Solution(method=self.method, positions=positions, converged=bool(r.converged),
-                        status=r.status, iterations=r.iterations, cg_iterations=r.cg_iterations,
+                        status=self._bone_names(r.status), iterations=r.iterations, cg_iterations=r.cg_iterations,
                         time_s=r.time_s + estimate_s, solve_time_s=r.time_s, setup_time_s=self.setup_time_s,
                         energy=r.energy,
                         grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,

@@ -198,6 +198,9 @@ class FemSolver::Newton {
   const Eigen::VectorXd& soft_gradient() const { return gs_; }
   const Eigen::VectorXd& bone_gradient() const { return gb_; }
   const std::vector<NeutralMode>& neutral_modes() const { return last_neutral_; }
+  /// The bone Schur complement of the last factorised Newton step (empty: none yet) and its poses.
+  const Eigen::MatrixXd& last_bone_schur() const { return last_S_; }
+  const BonePoses& last_schur_poses() const { return last_S_poses_; }
 
   SearchDirection direction(int /*iteration*/, PhaseTimes& time) {
     SearchDirection dir;
@@ -430,6 +433,8 @@ class FemSolver::Newton {
     Eigen::MatrixXd S = Hbb_ - Hsb_.transpose() * Wsb_;
     S = 0.5 * (S + S.transpose()).eval();
     const Eigen::VectorXd rb = -gb_ + Hsb_.transpose() * y_;
+    last_S_ = S;
+    last_S_poses_ = poses_;
     if (!s_.bones_.solve_schur(poses_, S, rb, exact, db_, neutral_)) return false;
     ds_ = -y_ - Wsb_ * db_;
     keep_bone_border(S);
@@ -561,6 +566,8 @@ class FemSolver::Newton {
   bool last_exact_ok_ = true, last_exact_ = false;
   bool lagged_indefinite_ = false;  // the last lagged PCG met p^T H p <= 0
   std::vector<NeutralMode> neutral_, last_neutral_;  // of the current / last step
+  Eigen::MatrixXd last_S_;
+  BonePoses last_S_poses_;
 };
 
 SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initial) {
@@ -575,6 +582,8 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   Newton newton(*this, load, act, initial);
   SolveResult res;
   newton_minimize(newton, options_, gradient_floor(act), t0, res, 0.0, cold_g0);
+  if (!res.converged && res.iterations == options_.max_iterations && newton.last_bone_schur().size())
+    res.status += bones_.weakest_turn(newton.last_schur_poses(), newton.last_bone_schur());
   res.set_neutral_modes(newton.neutral_modes());
   res.positions = newton.positions();
   res.time_s = seconds_since(t0);

@@ -5,6 +5,7 @@
 #include <utility>
 #include <stdexcept>
 #include <string>
+#include <cstdio>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -320,6 +321,27 @@ bool RigidBones::solve_schur(const BonePoses& poses, const Eigen::MatrixXd& S, c
     neutral.push_back({best, axis});
   }
   return true;
+}
+
+std::string RigidBones::weakest_turn(const BonePoses& poses, const Eigen::MatrixXd& S) const {
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (S + S.transpose()));
+  const Eigen::VectorXd& lam = es.eigenvalues();
+  const double lmax = lam.cwiseAbs().maxCoeff();
+  if (!(lmax > 0) || lam(0) > kWeakTurn * lmax) return "";
+  const Eigen::VectorXd v = es.eigenvectors().col(0);
+  int best = 0;
+  for (int b = 1; b < size(); ++b)
+    if (v.segment(bones_[b].offset, bones_[b].dofs).norm() > v.segment(bones_[best].offset, bones_[best].dofs).norm())
+      best = b;
+  const Bone& B = bones_[best];
+  const Vec3 axis = B.kind == Kind::Hinge ? poses[best].axis : Vec3(v.segment<3>(B.offset).normalized());
+  char text[320];
+  std::snprintf(text, sizeof text,
+                "; the turn of movable bone %d about (%.2f, %.2f, %.2f) is resisted %.1e times as stiffly as the "
+                "stiffest bone motion (a near-neutral mode: the energy is nearly flat along it, so Newton "
+                "converges slowly); a joint_stiffness on that bone, an antagonist muscle or fixing a bone settles it",
+                best, axis(0), axis(1), axis(2), std::max(lam(0), 0.0) / lmax);
+  return text;
 }
 
 }  // namespace emu

@@ -27,6 +27,7 @@
 //   [ H_sb' H_bb ] [db] = [-g_b],    H_bb = sum_t J_a' K_t,ac J_c + rotation term,
 // solved with the factor of H_ss, one back-substitution per bone unknown and
 // the dense Schur complement S = H_bb - H_sb' H_ss^-1 H_sb.
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -98,6 +99,13 @@ class RigidBones {
   /// `neutral` records it; false if S is indefinite beyond round-off.
   bool solve_schur(const BonePoses& poses, const Eigen::MatrixXd& S, const Eigen::VectorXd& rb, bool exact,
                    Eigen::VectorXd& db, std::vector<NeutralMode>& neutral) const;
+
+  /// Why a solve that ran out of iterations may have: where S's smallest
+  /// eigenvalue is under kWeakTurn of its largest, "; the turn of movable bone
+  /// b about (x, y, z) is resisted ... (a near-neutral mode): ..." naming the
+  /// fixes; else "".
+  std::string weakest_turn(const BonePoses& poses, const Eigen::MatrixXd& S) const;
+  static constexpr double kWeakTurn = 1e-2;
 
  private:
   using Kind = BoneForest::Kind;
