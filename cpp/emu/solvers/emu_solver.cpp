@@ -595,53 +595,63 @@ class EmuSolver::Newton {
 
   template <class Product>
   void build_coarse_space(const std::vector<Mat9>& H, bool exact, const Product& product) {
-    const Eigen::MatrixXd turn_map = s_.joints_ ? s_.joints_->turn_map(F_) : Eigen::MatrixXd();
-    coarse_.build(
-        F_,
-        [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
-          // the three turns in one pass over H's blocks
-          s_.turn_fits_->turns<3>(H, b, M, s_.emu_.alpha, s_.acap_->weight_volume(), Z, HZ);
-          for (int k = 0; k < 3; ++k) {
-            if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
-            else
-              s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
-          }
-        },
-        product, coarse_extra(H, exact, turn_map), s_.joints_ ? &turn_map : nullptr);
-  }
-
-  // The recycled directions and, in joint coordinates, each joint's turn
-  // smoothed once by the base preconditioner, z - B H z (rebuilt with H every
-  // step): the coarse turns' soft tissue follows as the fit places it, stiffer
-  // than the material lets it follow, and without the smoothed turns CG's
-  // truncated steps are short along a chain's soft turns while the answer is
-  // still far (docs/DESIGN.md, "Chains of bones in EMU").
-  std::vector<Mat9X> coarse_extra(const std::vector<Mat9>& H, bool exact, const Eigen::MatrixXd& turn_map) {
-    std::vector<Mat9X> extra = recycled_;
-    if (!s_.joints_) return extra;
-    const int nb = s_.layout_.num_bones, nu = s_.layout_.num_unknowns;
-    // the joint turns z = Z T and H z = (H Z) T from the bones' turns (their fits made at setup)
-    std::vector<Mat9X> z(turn_map.cols(), Mat9X::Zero(9, nu)), Hz(turn_map.cols(), Mat9X::Zero(9, nu));
+    // bone b's turns by M (3 tangents) and H of them, in one pass over H's blocks
+    const auto turn = [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
+      s_.turn_fits_->turns<3>(H, b, M, s_.emu_.alpha, s_.acap_->weight_volume(), Z, HZ);
+      for (int k = 0; k < 3; ++k) {
+        if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
+        else
+          s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
+      }
+    };
+    if (!s_.joints_) {
+      coarse_.build(F_, turn, product, recycled_);
+      return;
+    }
+    // In joint coordinates the bones' turns serve twice, made once: the
+    // smoothed joint turns are combinations of them, and the coarse space
+    // takes them as they are (its turn k of bone b is [e_k]x F_b, as here).
+    const int nb = s_.layout_.num_bones;
+    std::vector<std::array<Mat9X, 3>> Zb(nb), HZb(nb);
     for (int b = 0; b < nb; ++b) {
       std::array<Mat3, 3> M;
       for (int k = 0; k < 3; ++k) M[k] = cross_matrix(Vec3::Unit(k)) * unflatten(F_.col(s_.layout_.num_soft + b));
-      std::array<Mat9X, 3> Z, HZ;
-      s_.turn_fits_->turns<3>(H, b, M, s_.emu_.alpha, s_.acap_->weight_volume(), Z, HZ);
-      for (int k = 0; k < 3; ++k) {
-        if (s_.has_contact() && Hc_.nonZeros()) hessian_product(H, exact, Z[k], HZ[k]);
-        else s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
-        for (Eigen::Index j = 0; j < turn_map.cols(); ++j) {
+      turn(b, M, Zb[b], HZb[b]);
+    }
+    const Eigen::MatrixXd turn_map = s_.joints_->turn_map(F_);
+    coarse_.build(
+        F_,
+        [&](int b, const std::array<Mat3, 3>&, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
+          Z = std::move(Zb[b]);
+          HZ = std::move(HZb[b]);
+        },
+        product, smoothed_joint_turns(Zb, HZb, turn_map), &turn_map);
+  }
+
+  // The recycled directions and each joint's turn z = Z T (H z = (H Z) T,
+  // from the bones' turns Zb, HZb) smoothed once by the base preconditioner,
+  // z - B H z: the coarse turns' soft tissue follows as the fit places it,
+  // stiffer than the material lets it follow, and without the smoothed turns
+  // CG's truncated steps are short along a chain's soft turns while the
+  // answer is still far (docs/DESIGN.md, "Chains of bones in EMU").
+  std::vector<Mat9X> smoothed_joint_turns(const std::vector<std::array<Mat9X, 3>>& Zb,
+                                          const std::vector<std::array<Mat9X, 3>>& HZb,
+                                          const Eigen::MatrixXd& turn_map) const {
+    std::vector<Mat9X> extra = recycled_;
+    const int nb = s_.layout_.num_bones, nu = s_.layout_.num_unknowns;
+    Mat9X z, Hz, BHz;
+    for (Eigen::Index j = 0; j < turn_map.cols(); ++j) {
+      z.setZero(9, nu);
+      Hz.setZero(9, nu);
+      for (int b = 0; b < nb; ++b)
+        for (int k = 0; k < 3; ++k) {
           const double t = turn_map(3 * b + k, j);
           if (t == 0.0) continue;
-          z[j] += t * Z[k];
-          Hz[j] += t * HZ[k];
+          z += t * Zb[b][k];
+          Hz += t * HZb[b][k];
         }
-      }
-    }
-    Mat9X BHz;
-    for (Eigen::Index j = 0; j < turn_map.cols(); ++j) {
-      s_.base_precondition(F_, Hz[j], BHz);
-      extra.push_back(z[j] - BHz);
+      s_.base_precondition(F_, Hz, BHz);
+      extra.push_back(z - BHz);
     }
     return extra;
   }

@@ -41,19 +41,20 @@ Eigen::VectorXd JointCoordinates::fit(const Eigen::MatrixXd& T, const Eigen::Vec
   return (T.transpose() * T).ldlt().solve(T.transpose() * omega);
 }
 
-Eigen::VectorXd JointCoordinates::coordinates(const Mat9X& F, const Mat9X& v) const {
+Eigen::VectorXd JointCoordinates::world_turns(const Mat9X& F, const Mat9X& v) const {
   Eigen::VectorXd omega(3 * bones());
   for (int b = 0; b < bones(); ++b)
     omega.segment<3>(3 * b) = skew_vee(unflatten(v.col(num_soft_ + b)) * rotation(F, b).transpose());
-  return fit(turn_map(F), omega);
+  return omega;
+}
+
+Eigen::VectorXd JointCoordinates::coordinates(const Mat9X& F, const Mat9X& v) const {
+  return fit(turn_map(F), world_turns(F, v));
 }
 
 void JointCoordinates::project(const Mat9X& F, Mat9X& v) const {
   const Eigen::MatrixXd T = turn_map(F);
-  Eigen::VectorXd omega(3 * bones());
-  for (int b = 0; b < bones(); ++b)
-    omega.segment<3>(3 * b) = skew_vee(unflatten(v.col(num_soft_ + b)) * rotation(F, b).transpose());
-  omega = T * fit(T, omega);
+  const Eigen::VectorXd omega = T * fit(T, world_turns(F, v));
   for (int b = 0; b < bones(); ++b)
     v.col(num_soft_ + b) = flatten(Mat3(cross_matrix(omega.segment<3>(3 * b)) * rotation(F, b)));
 }
@@ -126,7 +127,8 @@ Eigen::MatrixXd JointCoordinates::rotation_term(const Mat9X& F, const Mat9X& g, 
 
 void JointCoordinates::add_rotation_product(const Mat9X& F, const Eigen::MatrixXd& W, const Mat9X& v,
                                             Mat9X& out) const {
-  add_tangent(F, turn_map(F), W * coordinates(F, v), out);
+  const Eigen::MatrixXd T = turn_map(F);
+  add_tangent(F, T, W * fit(T, world_turns(F, v)), out);
 }
 
 void JointCoordinates::project_onto_joints(Mat9X& F, const Eigen::MatrixX3d& h) const {

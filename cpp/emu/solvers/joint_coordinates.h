@@ -83,6 +83,8 @@ class JointCoordinates {
  private:
   /// The world axes of bone b's joint turns at F (3 by 3 or 3 by 1).
   Eigen::Matrix<double, 3, Eigen::Dynamic> axes(const Mat9X& F, int b) const;
+  /// omega (3 #bones): the world turn of each of v's bone columns at F (their tangent part).
+  Eigen::VectorXd world_turns(const Mat9X& F, const Mat9X& v) const;
   /// theta = (T'T)^-1 T' omega for world turns omega (3 #bones).
   Eigen::VectorXd fit(const Eigen::MatrixXd& T, const Eigen::VectorXd& omega) const;
   /// gradient_theta (size()) as the joint-consistent tangent it represents, added to out's bone columns.
