@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, DEFAULT_ACCURACY,
+from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, CERTIFY_CONTRACTION, DEFAULT_ACCURACY,
                        DEFAULT_ALPHA, STEP_FRACTION, STEP_GRAD, AccuracyMode, AccuracyWarning)
 from .checks import inverted_tets
 from .contact import ContactTerm
@@ -66,10 +66,11 @@ class Solution:
     iterates    with solve(record_iterates=True): one (time_s, positions (n, 3))
                 per iterate, the start first (see emu.error_history)
     error_estimate  EMU: the estimated vertex error to the converged FEM answer
-                (the measure of emu.vertex_error), from one Newton correction of
-                the FEM energy at EMU's positions (docs/DESIGN.md: how it was
-                validated); None for FEM, or where it is not available
-                (error_estimate_note says why)
+                (the measure of emu.vertex_error): the distance from EMU's
+                positions to two Newton corrections of the FEM energy from them,
+                fem_check (docs/DESIGN.md: how it was validated; see
+                error_estimate_certified); None for FEM, or where it is not
+                available (error_estimate_note says why)
     inverted_tets  how many tets are inverted or collapsed at ``positions``
                 (emu.inverted_tets lists them)
     emu_positions  EMU: its own answer, the ACAP fit x*(F) of its unknowns F
@@ -85,7 +86,18 @@ class Solution:
                 gap between surfaces that may touch (inf: none within reach),
                 "intersecting": False (checked)}; None otherwise
     fem_correction  EMU with an error estimate: the FEM Newton correction x1 of
-                emu_positions the estimate measured (estimate = vertex_error(x, x1))
+                emu_positions
+    fem_check   EMU with an error estimate: the FEM Newton correction x2 of
+                fem_correction (estimate = vertex_error(emu_positions, x2));
+                None where that step failed
+    error_estimate_certified  EMU with an error estimate: True where one more
+                FEM Newton step, from fem_correction, contracts (at most
+                CERTIFY_CONTRACTION of the first, or as short as FEM's own
+                accuracy stop): FEM's Newton is in its regime at EMU's answer and
+                the estimate holds; False where it does not (a softly resisted
+                turn, a valley far from quadratic: the estimate can be several
+                times low; accuracy mode then settles the answer by a FEM solve
+                from it, and error_estimate_note says so); None without an estimate
     accuracy_reached  EMU with ``accuracy=``: whether the error estimate ended
                 within the accuracy asked for (False: an AccuracyWarning, and
                 error_estimate_note says by how much it missed); None otherwise
@@ -126,6 +138,8 @@ class Solution:
     emu_positions: np.ndarray | None = field(default=None, repr=False)
     corrected: bool = False
     fem_correction: np.ndarray | None = field(default=None, repr=False)
+    error_estimate_certified: bool | None = None
+    fem_check: np.ndarray | None = field(default=None, repr=False)
     contact: dict | None = None      # scenes with contact: active pairs and minimum gap at positions
     solve_time_s: float = 0.0        # the solver's iterations alone (time_s: the whole solve)
 
@@ -586,6 +600,14 @@ class Solver:
         x1, estimate_s, note = (self._fem_correction_of(load, positions) if self.error_estimate
                                 else (None, 0.0, ""))
         estimate = None if x1 is None else vertex_error(positions, x1)
+        certified = x2 = None
+        if x1 is not None:
+            t1 = time.perf_counter()
+            certified, x2, why = self._certify(load, estimate, x1)
+            if x2 is not None:   # two FEM Newton steps from EMU's answer: the nearer FEM point
+                estimate = vertex_error(positions, x2)
+            estimate_s += time.perf_counter() - t1
+            note = note or why
         history["time_s"] = history["time_s"] + time_offset
         return Solution(method=self.method, positions=positions, converged=bool(r.converged),
                         status=self._bone_names(r.status), iterations=r.iterations, cg_iterations=r.cg_iterations,
@@ -600,6 +622,7 @@ class Solver:
                         phase_times=_phase_times(r, estimate_s),
                         inverted_tets=len(inverted_tets(self.scene.tets, positions)),
                         emu_positions=positions if self.method == "emu" else None, fem_correction=x1,
+                        error_estimate_certified=certified, fem_check=x2,
                         contact=self._contact_report(positions))
 
     def _contact_report(self, positions):
@@ -622,6 +645,12 @@ class Solver:
             # re-solves) by PCG on the last factorisation (docs/DESIGN.md, "The FEM
             # baselines: a factorisation per step, or a lagged factor")
             opts.lagged_cg_iterations = ESTIMATE_LAGGED_CG   # (without contact: its pattern changes)
+            if self.accuracy is not None:   # _fem_settle: FEM's accuracy-mode stop, as Solver(method="fem") sets it
+                opts.step_tol = self.settings["step_fraction"] * self.accuracy * bbox_diagonal(self.scene.points)
+                opts.step_tol_grad = STEP_GRAD
+                opts.step_tol_cold_scale = True
+                opts.lagged_cg_forcing = ACCURACY_CG_FORCING_MIN
+                opts.max_iterations = 200
             try:   # the same energy as EMU's, contact included
                 self._estimator = self._named(_core.FemSolver, self.model, opts, self.contact)
             except ValueError as e:   # e.g. a closed loop of joints (FEM takes trees of bones)
@@ -633,6 +662,61 @@ class Solver:
         except RuntimeError as e:
             return None, time.perf_counter() - t0, f"no error estimate: {e}"
         return x1, time.perf_counter() - t0, ""
+
+    def _certify(self, load, estimate: float, x1) -> tuple:
+        """(certified, x2, note): x2 is one more FEM Newton correction, of x1
+        (PCG on the estimator's factor: nothing factorised), and the estimate
+        |x - x2| holds where FEM's Newton is in its regime at EMU's answer x:
+        |x2 - x1| at most CERTIFY_CONTRACTION |x1 - x|, or at most
+        STEP_FRACTION x the accuracy (FEM's own accuracy stop). Where it does
+        not contract, FEM's energy is far from quadratic about x (a softly
+        resisted turn: Newton steps there cover a fraction of the way) and the
+        estimate can be several times low (docs/DESIGN.md, "The estimate's
+        certificate")."""
+        if estimate == 0.0:   # FEM's gradient at round-off at x: no step, nothing to certify
+            return True, x1, ""
+        if self._estimator is None:   # an estimate from elsewhere (tests' stand-ins): no certificate
+            return None, None, ""
+        if self.contact is None:
+            x2 = self._correction(load, x1)
+        else:   # no lagged factor with contact (its pattern changes): a step of its own
+            try:
+                x2 = np.asarray(self._estimator.newton_correction(load, x1, max_steps=1))
+            except (RuntimeError, ValueError):
+                x2 = None
+        if x2 is None:
+            return False, None, (f"the error estimate ({estimate:.2g}) is not certified: FEM's Newton step from "
+                                 "its correction met negative curvature or did not converge (EMU's answer is not "
+                                 "in FEM's Newton regime), so the true error can be several times the estimate")
+        second = vertex_error(x1, x2)
+        floor = STEP_FRACTION * (self.accuracy if self.accuracy is not None else DEFAULT_ACCURACY)
+        if second <= CERTIFY_CONTRACTION * estimate or second <= floor:
+            return True, x2, ""
+        return False, x2, (f"the error estimate ({estimate:.2g}) is not certified: a second FEM Newton step from "
+                           f"its correction moved {second:.2g} ({second / estimate:.2g} of the first; Newton's "
+                           f"regime needs at most {CERTIFY_CONTRACTION:g}): FEM's energy is far from quadratic "
+                           "about EMU's answer (a softly resisted motion), so the true error can be several times "
+                           "the estimate")
+
+    def _fem_settle(self, load, x):
+        """A FEM solve from positions x with FEM's accuracy-mode stop, on the
+        estimator (its lagged factor): accuracy mode's answer where EMU's
+        estimate could not certify itself. (core result, the last two steps'
+        vertex lengths) or None where it fails."""
+        steps, last = [], [np.asarray(x, dtype=np.float64)]
+
+        def record(_, positions):
+            p = np.array(positions)
+            steps.append(vertex_error(last[0], p))
+            last[0] = p
+            return False
+        try:
+            r = self._estimator.solve_from(load, x, on_iteration=record)
+        except (RuntimeError, ValueError):
+            return None
+        if not r.converged or not np.all(np.isfinite(r.positions)):
+            return None
+        return r, steps[-2:]
 
     def _neutral_modes(self, r) -> list:
         bones = self.scene.movable_bones
