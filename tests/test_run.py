@@ -127,3 +127,28 @@ def test_run_scene_writes_the_fibres_it_solved_with(tmp_path):
         p = s.parts[name]
         ref = attachment_fibers(s.points, s.tets, name, p.tets, s.attachments(name))
         np.testing.assert_allclose(fib[p.tets], ref, atol=1e-8)
+
+
+def test_run_scene_logs_and_sums_up_frames_settled_by_fem(tmp_path, monkeypatch):
+    """Frames whose error estimate does not certify itself (here forced: a
+    certificate no second FEM step passes) are settled by FEM: each frame's
+    log says so, the progress line says so, and the run's summary counts
+    them; a run where every estimate certified itself has no summary."""
+    import sys
+    from emu.app.run import accuracy_summary
+    p = tmp_path / "scene.toml"
+    p.write_text(GOOD.replace("alpha = 100.0", "accuracy = 0.001"))
+    spec = load_scene_file(p)
+    log = run_scene(spec, str(tmp_path / "plain"), progress=lambda line: None)
+    assert all(f["error_estimate_certified"] for f in log["frames"][1:])
+    assert accuracy_summary(log) == ""
+    monkeypatch.setattr(sys.modules["emu.solve"], "CERTIFY_CONTRACTION", 0.0)
+    monkeypatch.setattr(sys.modules["emu.solve"], "STEP_FRACTION", 0.0)
+    lines = []
+    with pytest.warns(emu.AccuracyWarning, match="could not certify itself"):
+        log = run_scene(load_scene_file(p), str(tmp_path / "settled"), progress=lines.append)
+    settled = [f["frame"] for f in log["frames"] if f["settled_by_fem"]]
+    assert settled == [1, 2]   # frame 0 is the rest state: nothing to correct
+    assert all("settled by a FEM solve" in log["frames"][k]["error_estimate_note"] for k in settled)
+    assert sum("settled by FEM" in line for line in lines) == 2
+    assert accuracy_summary(log).startswith("2 of 3 frame(s) settled by a FEM solve")

@@ -3,7 +3,10 @@ error to the converged FEM answer, over scenes and alpha.
 
 For each scene: FEM to a tight tolerance (the reference), then EMU at each
 alpha; prints a Markdown table of the true vertex error, the estimate, their
-ratio (the target band is [0.5, 2]), EMU's solve time and the estimate's time.
+ratio (the target band is [0.5, 2]), the ratio one FEM Newton correction x1
+alone would give (|x - x1| / true: the estimate before its second step), the
+certificate (Solution.error_estimate_certified: the second step contracted),
+EMU's solve time and the estimate's time.
 
     python bench/studies/error_estimate.py [--scenes fusiform simple_joint ...] [--alphas 10 30 100 300 1000]
     python bench/studies/error_estimate.py --variants ...   # estimate / true of each way to take the correction
@@ -44,8 +47,9 @@ def main(argv=None):
     print()
     variants = [("exact", 1), ("filtered", 1), ("lower-energy", 1), ("lower-energy", 2)] if a.variants else []
     extra = "".join(f" {h} x{k} |" for h, k in variants)
-    print("| scene | tets | alpha / mu | true error | estimate | estimate / true | EMU solve s | estimate s |" + extra)
-    print("|---|---|---|---|---|---|---|---|" + "---|" * len(variants))
+    print("| scene | tets | alpha / mu | true error | estimate | estimate / true | x1 alone / true | certified | "
+          "EMU solve s | estimate s |" + extra)
+    print("|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(variants))
     outside = 0
     for name in a.scenes:
         scene, act, normalized = SCENES[name]()
@@ -57,13 +61,17 @@ def main(argv=None):
             true = emu.vertex_error(sol, fem)
             est = sol.error_estimate
             ratio = est / true if est is not None and true > 0 else float("nan")
+            one = (emu.vertex_error(sol.positions, sol.fem_correction) / true
+                   if sol.fem_correction is not None and true > 0 else float("nan"))
             outside += not (0.5 <= ratio <= 2)
             cols = ""
             for h, k in variants:
                 x1 = fem_solver._core.newton_correction(load, sol.positions, h, k)
                 cols += f" {emu.vertex_error(sol.positions, x1) / true:.2f} |"
             print(f"| {name} | {len(scene.tets)} | {alpha:g} | {true:.2e} | "
-                  f"{'-' if est is None else f'{est:.2e}'} | {ratio:.2f} | {sol.solve_time_s:.2f} | "
+                  f"{'-' if est is None else f'{est:.2e}'} | {ratio:.2f} | {one:.2f} | "
+                  f"{'-' if sol.error_estimate_certified is None else ('yes' if sol.error_estimate_certified else 'no')} | "
+                  f"{sol.solve_time_s:.2f} | "
                   f"{sol.error_estimate_time_s:.2f} |" + cols, flush=True)
     print(f"\n{outside} case(s) outside [0.5, 2]")
 

@@ -36,7 +36,7 @@ from ..scenes import fusiform
 from ..options import CHOICES, OPTIONS, check_options, parse_option
 from ..solve import Solver
 from .demo import run_demo
-from .run import run_scene
+from .run import accuracy_summary, run_scene
 from .scenefile import load_scene_file
 
 
@@ -293,6 +293,8 @@ def _run(args):
                              ("run.usd (USD)", spec.output["usd"] and log["frames"]),
                              ("preview.png", spec.output["preview"] and log["frames"])) if on]
     print(f"wrote {args.out or spec.output['dir']}: {', '.join(wrote)}")
+    if summary := accuracy_summary(log):
+        print(f"accuracy: {summary}")
     if log["interrupted"]:
         return 130
     return 0 if all(f["converged"] for f in log["frames"]) else 1

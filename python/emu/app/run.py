@@ -116,6 +116,8 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                                   "error_estimate": sol.error_estimate,
                                   "error_estimate_s": sol.error_estimate_time_s,
                                   "accuracy_reached": sol.accuracy_reached, "fem_corrected": sol.corrected,
+                                  "error_estimate_certified": sol.error_estimate_certified,
+                                  "settled_by_fem": _settled(sol), "error_estimate_note": sol.error_estimate_note,
                                   "inverted_tets": sol.inverted_tets, "contact": sol.contact})
             if usd is not None:
                 usd.add_frame(k, sol.positions, spec.scene.normalised_activation(act))
@@ -131,7 +133,9 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                 est += f", {sol.inverted_tets} inverted tet(s)"
             if sol.accuracy_reached is False:
                 est += f" ({sol.error_estimate_note})"
-            if sol.corrected:
+            if _settled(sol):
+                est += " (estimate not certified: settled by FEM)"
+            elif sol.corrected:
                 est += " (FEM-corrected)"
             if sol.contact is not None:
                 est += f", {sol.contact['pairs']} contact pair(s), gap {sol.contact['min_distance']:.2g}"
@@ -154,3 +158,24 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
                 kept[last] = prev.positions.copy()
             _preview(os.path.join(out, "preview.png"), spec, kept, log)
     return log
+
+
+def _settled(sol) -> bool:
+    """EMU's answer settled by a FEM solve (its estimate did not certify itself)."""
+    return bool(sol.corrected and sol.error_estimate_certified is False)
+
+
+def accuracy_summary(log) -> str:
+    """One line on the frames whose accuracy was not EMU's own: settled by FEM
+    (the estimate did not certify itself) or not reached; "" where none."""
+    frames = log["frames"]
+    settled = sum(bool(f.get("settled_by_fem")) for f in frames)
+    missed = sum(f.get("accuracy_reached") is False for f in frames)
+    parts = []
+    if settled:
+        parts.append(f"{settled} of {len(frames)} frame(s) settled by a FEM solve (EMU's error estimate did not "
+                     "certify itself there; where most frames are, method = \"fem\" under [solver] is likely faster)")
+    if missed:
+        parts.append(f"{missed} of {len(frames)} frame(s) did not reach the accuracy asked for (log.json: "
+                     "error_estimate_note)")
+    return "; ".join(parts)
