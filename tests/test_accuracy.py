@@ -82,8 +82,9 @@ def test_an_estimate_that_does_not_certify_itself_is_settled_by_fem(monkeypatch)
     s = arm(3)
     act = {"flexor": 0.0, "extensor": 8e4}
     first = emu.Solver(s, "emu", alpha=234.0).solve(act)   # no accuracy mode: the certificate as measured
-    contraction = (emu.vertex_error(first.fem_correction, first.fem_check)
-                   / emu.vertex_error(first.emu_positions, first.fem_correction))
+    x1, x2 = first.fem_steps[:2]
+    assert x1 is first.fem_correction and first.fem_check is first.fem_steps[-1]
+    contraction = emu.vertex_error(x1, x2) / emu.vertex_error(first.emu_positions, x1)
     assert 0.2 < contraction <= sys.modules["emu.accuracy"].CERTIFY_CONTRACTION and first.error_estimate_certified
     assert first.error_estimate == pytest.approx(emu.vertex_error(first.emu_positions, first.fem_check))
     monkeypatch.setattr(sys.modules["emu.solve"], "CERTIFY_CONTRACTION", 0.2)
@@ -143,7 +144,7 @@ def test_correct_on_synthetic_corrections():
 
     def run(own, steps):
         solver._estimator = Corrections(steps)
-        trial = dataclasses.replace(sol, positions=x, fem_correction=at(own), fem_check=None,
+        trial = dataclasses.replace(sol, positions=x, fem_correction=at(own), fem_check=None, fem_steps=None,
                                     error_estimate=emu.vertex_error(x, at(own)), corrected=False)
         return solver._accuracy.correct(solver, load, trial), trial, solver._estimator.calls
 

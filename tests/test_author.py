@@ -175,8 +175,9 @@ def test_cli_mesh_writes_a_scene_emu_info_reads(arm_parts, tmp_path, capsys):
     assert main(["mesh", arm_parts, "--out", str(out), "--threads", "1"]) == 0
     text = capsys.readouterr().out
     assert "attachment: biceps on humerus" in text and "hinge humerus - forearm" in text
-    for f in ("mesh.vtu", "scene.json", "scene.toml", "report.json"):
+    for f in ("mesh.vtu", "scene.json", "scene.toml", "report.json", "mesh.png"):
         assert (out / f).exists()
+    assert (out / "mesh.png").stat().st_size > 10000 and "mesh.png (the parts, joints and attachments)" in text
     assert main(["info", str(out / "scene.toml")]) == 0
     assert "joint humerus - forearm: hinge" in capsys.readouterr().out
 

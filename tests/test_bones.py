@@ -715,3 +715,74 @@ def test_fem_at_its_iteration_cap_names_a_weakly_resisted_turn():
     s.parts["humerus"].joint_stiffness = 1e4
     firm = emu.solve(s, {"biceps": 2e3}, "fem", rtol_grad=1e-10, max_iterations=40)
     assert "near-neutral" not in firm.status, firm.status
+
+
+def _two_shell_scene(with_shell: bool):
+    """A fusiform muscle from a fixed bone to a movable one; with_shell: the
+    movable bone has a second shell touching nothing (ulna + radius as one
+    forearm), a copy of the first set beside the muscle."""
+    from emu.meshes import fusiform
+    m = fusiform(2, tendon_fraction=0.0)
+    z = m.points[m.tets].mean(axis=1)[:, 2]
+    lo, hi = 0.2 * m.length, 0.8 * m.length
+    points, tets = m.points, m.tets
+    distal = z > hi
+    if with_shell:
+        verts, local = np.unique(m.tets[distal], return_inverse=True)
+        width = np.ptp(m.points[:, 0])
+        points = np.vstack([m.points, m.points[verts] + [2.0 * width, 0.0, 0.0]])
+        tets = np.vstack([m.tets, len(m.points) + local.reshape(-1, 4)])
+    s = emu.Scene(points, tets, warn=False)
+    pad = np.zeros(len(tets) - len(m.tets), bool)
+    s.add_bone("proximal", np.concatenate([z < lo, pad]))
+    s.add_bone("distal", np.concatenate([distal, ~pad]), fixed=False)
+    s.add_muscle("belly", np.concatenate([(z >= lo) & (z <= hi), pad]))
+    return s, len(m.points)
+
+
+@pytest.mark.parametrize("method", ["fem", "emu"])
+def test_a_bone_of_two_shells_moves_as_one(method):
+    """A movable bone may be several shells (arm26's forearm: ulna + radius):
+    a shell touching nothing is held by the bone it belongs to, not 'held by
+    nothing'; it moves rigidly with the rest of the bone, and the answer on
+    the rest of the mesh is the one without it (a rigid shell stores no
+    energy)."""
+    one, n = _two_shell_scene(False)
+    two, _ = _two_shell_scene(True)
+    act = {"belly": 0.5}
+    ref = emu.solve(one, act, "fem", normalized=True, rtol_grad=1e-10)
+    sol = emu.solve(two, act, method, normalized=True, **({"rtol_grad": 1e-10} if method == "fem" else {}))
+    assert sol.converged, sol.status
+    motion = bone_motion(two, sol, "distal")
+    moved = np.linalg.norm(sol.positions[n:] - two.points[n:], axis=1)
+    assert motion.rigidity < 1e-6 and moved.min() > 0.05 * emu.bbox_diagonal(one.points)   # one body, pulled
+    tol = 1e-6 if method == "fem" else 0.01
+    assert emu.vertex_error(sol.positions[:n], ref.positions) * emu.bbox_diagonal(two.points) \
+        <= tol * emu.bbox_diagonal(one.points)
+
+
+def test_a_joint_the_mesh_made_beside_a_declared_one_is_an_error(small_arm):
+    """Bones that share vertices (the mesh fused them where they touch) and
+    also have a declared joint: never a second joint beside the declared one
+    (arm26 at its straight pose fused humerus and forearm at two vertices);
+    the error names both bones, where, and the gap the mesh needs."""
+    import copy
+    s = copy.deepcopy(small_arm)
+    (j,) = [j for j in s.joints() if set(j.bones) == {"humerus", "forearm"}]
+    s.add_joint("forearm", "humerus", centre=j.centre + [0.0, 0.0, 0.1], axis=[1.0, 0.0, 0.0])
+    for method in ("fem", "emu"):
+        with pytest.raises(ValueError, match=r"bones 'humerus' and 'forearm' share \d+ vertex/vertices near "
+                                             r"\[.*\] beside their declared hinge joint.*second hinge.*at least "
+                                             r"[0-9.e-]+ apart"):
+            emu.Solver(s, method)
+
+
+def test_emu_refuses_a_loop_of_joints_in_accuracy_mode():
+    """A loop of joints: FEM refuses it, so EMU's error estimate cannot exist
+    and accuracy mode (EMU's default) refuses it too, naming the loop, FEM's
+    fix and the way to solve it without an estimate (alpha=)."""
+    s = bone_loop_scene()
+    for kw in ({}, {"accuracy": 0.01}):
+        with pytest.raises(ValueError, match=r"accuracy mode needs FEM's error estimate.*'b' and 'c' close a "
+                                             r"loop of joints.*give alpha= without accuracy"):
+            emu.Solver(s, "emu", **kw)

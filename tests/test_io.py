@@ -404,3 +404,40 @@ def test_emu_info_names_a_part_held_by_nothing(tmp_path, capsys):
     assert "cannot be solved as it is: 'stray' is held by nothing" in out and 'pins = ["stray"]' in out, out
     with pytest.raises(ValueError, match="'stray' is held by nothing"):
         emu.io.load_scene(path, kinds={"bone": "bone"}, fibers={"belly": [0, 0, 1.0], "stray": [0, 0, 1.0]}).validate()
+
+
+def test_emu_info_names_a_loop_tendon_attachments_and_the_mesher_defects(tmp_path, capsys):
+    """emu info, before any solve: a loop of joints (movable b and c hinged
+    to each other and each to the fixed a) named with the fixes; a muscle
+    attached only through its tendons listed with those attachments (not
+    "none"); the surface defects emu mesh recorded in report.json beside the
+    mesh, where that report describes this mesh."""
+    import json
+    from emu.app.cli import main
+    pts, tets, lab = emu.meshes.block_mesh({"a": [(0, 0), (3, 1)], "b": [(1, 1)], "c": [(2, 2)],
+                                           "m": [(0, 1)]}, 1)
+    path = tmp_path / "loop.vtu"
+    emu.io.write(path, pts, tets, cell_data={"part": lab}, part_names={0: "a", 1: "b", 2: "c", 3: "m"})
+    scene_file = tmp_path / "loop.toml"
+    scene_file.write_text('[mesh]\npath = "loop.vtu"\n[parts.a]\nkind = "bone"\n[parts.b]\nkind = "bone"\n'
+                          '[parts.c]\nkind = "bone"\n[parts.m]\nfibers = [1.0, 1.0, 0.0]\n'
+                          '[bones.b]\nfixed = false\n[bones.c]\nfixed = false\n'
+                          '[activation.m]\nkeys = [[0.0, 0.0], [1.0, 0.3]]\nnormalized = true\n')
+    (tmp_path / "report.json").write_text(json.dumps({"tets": len(tets), "defects": ["part 'a': a test defect"]}))
+    main(["info", str(scene_file)])
+    out = capsys.readouterr().out
+    assert "loop: bones 'b' and 'c' close a loop of joints: FEM and EMU's accuracy mode" in out, out
+    assert "surface defect (found by emu mesh): part 'a': a test defect" in out
+    (tmp_path / "report.json").write_text(json.dumps({"tets": len(tets) + 1, "defects": ["stale"]}))
+    main(["info", str(scene_file)])
+    assert "stale" not in capsys.readouterr().out   # a report of another mesh is not this one's
+    # a muscle attached only through its tendons (emu mesh's tendon_length)
+    from conftest import bone_muscle_bone
+    s, m, _ = bone_muscle_bone(0.2, r=2)
+    s.split_tendons("belly", 0.1 * m.length)
+    via = s.tendon_attachments("belly")
+    assert set(via) == {"proximal", "distal"} and {t for t, _ in via.values()} == {"belly_tendon"}
+    for bone, (tendon, ids) in via.items():
+        bone_verts = set(s.tets[s.parts[bone].tets].ravel().tolist())
+        tendon_verts = set(s.tets[s.parts[tendon].tets].ravel().tolist())
+        assert len(ids) > 0 and set(ids.tolist()) == bone_verts & tendon_verts

@@ -64,16 +64,19 @@ ACCURACY_CG_FORCING = 0.01
 # x target (FEM's own accuracy stop, for corrections that do not contract
 # twice in a row).
 CORRECTION_CONTRACTION, MAX_CORRECTIONS = 0.3, 4
-# The error estimate |x2 - x| (two FEM Newton steps from EMU's answer x) is
-# certified where the second step contracts: |x2 - x1| <= CERTIFY_CONTRACTION
-# |x1 - x| (or is within STEP_FRACTION x target, FEM's own stop). Where FEM's
-# Newton converges at least linearly at the rate r its two steps show, the
-# estimate is at least (1 - r^2) of the true error: 0.75 at r = 0.5, so an
-# accepted estimate (<= ACCEPT x target) keeps the true error within 0.8 x
-# target. Otherwise FEM's energy is far from quadratic about x (a softly
+# The error estimate |y - x| (y: FEM Newton steps from EMU's answer x, the
+# first x1 on a factorisation, up to CERTIFY_STEPS more by PCG on it) is
+# certified where every step after x1 is at most CERTIFY_CONTRACTION of the
+# one before, or the last is within STEP_FRACTION x target (FEM's own stop;
+# the steps end early at a tenth of it). Where FEM's Newton converges at least linearly at rate r
+# the estimate is then at least (1 - r^2) of the true error (0.75 at r =
+# 0.5), so an accepted estimate (<= ACCEPT x target) keeps the true error
+# within 0.8 x target; two steps in a row, because one short step after a
+# long one also happens far from Newton's regime (on real bones: 0.25 and
+# within FEM's stop, then 2.75). Otherwise FEM's energy is far from quadratic about x (a softly
 # resisted turn) and the estimate can be several times low: the answer is
-# settled by a FEM solve from x2 (docs/DESIGN.md, "The estimate's certificate").
-CERTIFY_CONTRACTION = 0.5
+# settled by a FEM solve from y (docs/DESIGN.md, "The estimate's certificate").
+CERTIFY_CONTRACTION, CERTIFY_STEPS = 0.5, 2
 # EMU without alpha or accuracy: accuracy = DEFAULT_ACCURACY, starting at DEFAULT_ALPHA.
 DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
 # The step test applies once |g| <= STEP_GRAD max(|g_0|, |g| at the cold start
@@ -161,7 +164,8 @@ class AccuracyMode:
             estimate_s += sol.error_estimate_time_s
         if sol.converged and sol.error_estimate_certified is False and self.fem_correction:
             t1 = time.perf_counter()
-            self.settle(port, load, sol)
+            if self.settle(port, load, sol) and sol.iterates is not None:   # the settled answer, last
+                sol.iterates.append((time.perf_counter() - t0, sol.positions))
             estimate_s += time.perf_counter() - t1
         self._totals(sol, runs, estimate_s)
         if sol.error_estimate is not None:
@@ -264,30 +268,34 @@ class AccuracyMode:
         target = self.target
         x, x1 = sol.positions, sol.fem_correction
         own = None if x1 is None else vertex_error(x, x1)
-        x2 = sol.fem_check if sol.fem_check is not None else (None if x1 is None else port._correction(load, x1))
-        if x1 is None or x2 is None:
+        if x1 is None:
             return False, None
-        points, steps = [x1, x2], [vertex_error(x1, x2)]
+        points = list(sol.fem_steps) if sol.fem_steps else [x1]   # the estimate's and certificate's own steps
+        if len(points) == 1:
+            if (x2 := port._correction(load, x1)) is None:
+                return False, None
+            points.append(x2)
+        steps = [vertex_error(a, b) for a, b in zip(points, points[1:])]
         # corrections that do not shrink, or stay longer than the target: no
         # FEM point near enough to be worth another
         if not (steps[0] < own and steps[0] <= ACCEPT * target):
             return False, None
-        while len(steps) < MAX_CORRECTIONS:
+        while True:
+            if len(steps) == 2 and steps[1] <= CORRECTION_CONTRACTION * steps[0]:
+                if steps[0] > CORRECTION_CONTRACTION * own:   # x1 overshot: EMU's answer is not corrected
+                    return False, vertex_error(x, points[2])
+                answer, estimate = points[1], steps[0]
+                break
+            if len(steps) >= 2 and steps[-1] <= STEP_FRACTION * target:
+                answer, estimate = points[-1], steps[-2] + steps[-1]
+                break
+            if len(steps) >= MAX_CORRECTIONS:
+                return False, None
             y = port._correction(load, points[-1])
             if y is None:
                 return False, None
             points.append(y)
             steps.append(vertex_error(points[-2], y))
-            if len(steps) == 2 and steps[1] <= CORRECTION_CONTRACTION * steps[0]:
-                if steps[0] > CORRECTION_CONTRACTION * own:   # x1 overshot: EMU's answer is not corrected
-                    return False, vertex_error(x, y)
-                answer, estimate = points[1], steps[0]
-                break
-            if steps[-1] <= STEP_FRACTION * target:
-                answer, estimate = points[-1], steps[-2] + steps[-1]
-                break
-        else:
-            return False, None
         sol.positions, sol.corrected, sol.error_estimate = answer, True, estimate
         sol.error_estimate_note = (f"EMU's answer (estimated {own:.2g} from FEM's) corrected by {len(steps)} FEM "
                                    "Newton steps; the estimate is the length of the last ones")

@@ -50,6 +50,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .fibers import laplace_fibers
+from .io.plots import mesh_picture
+from .joints import joint_loop, loop_note
 from .scene import Scene
 
 __all__ = ["PartSpec", "JointSpec", "PartsFile", "AuthoredScene", "read_parts", "read_surface",
@@ -599,6 +601,7 @@ def _build_scene(spec: PartsFile, points, tets, part, edge, defects, mesh_s, t0)
         "attachments": attachments, "joints": joints, "fibers": fiber_notes, "defects": defects,
         "free_bones": [b for b in scene.movable_bones
                        if not any(b in j["bones"] for j in joints)],
+        "loop": (None if (pair := joint_loop(scene.joints(), scene.movable_bones)) is None else loop_note(pair)),
     }
     return AuthoredScene(scene, out_names, out_kinds, out_part, fiber, joints, report)
 
@@ -642,19 +645,22 @@ def _joints(spec: PartsFile, scene: Scene, points, tets, part, verts, edge) -> l
     return out
 
 
-def write_authored(result: AuthoredScene, out_dir, *, frames: int = 20, dt: float = 0.05) -> dict:
+def write_authored(result: AuthoredScene, out_dir, *, frames: int = 20, dt: float = 0.05,
+                   picture: bool = True) -> dict:
     """Write what `author` made into out_dir: mesh.vtu (cell data ``part``: the
     part id, ``fiber``: unit fibres, zero off the muscles), scene.json (the part
     ids' names and kinds, which emu.io.read takes from beside the mesh) and
     scene.toml (a scene file `emu info` and `emu run` accept as it is: movable
-    bones, the joints, a default activation ramp per muscle to edit). Returns
-    {name: path}."""
+    bones, the joints, a default activation ramp per muscle to edit), report.json
+    and, with picture, mesh.png (emu.io.plots.mesh_picture: the parts
+    coloured, joints and attachments marked). Returns {name: path}."""
     from .io.mesh import write
 
     out_dir = os.fspath(out_dir)
     os.makedirs(out_dir, exist_ok=True)
     paths = {k: os.path.join(out_dir, f) for k, f in
-             (("mesh", "mesh.vtu"), ("parts", "scene.json"), ("scene", "scene.toml"), ("report", "report.json"))}
+             (("mesh", "mesh.vtu"), ("parts", "scene.json"), ("scene", "scene.toml"), ("report", "report.json"),
+              ("picture", "mesh.png"))}
     s = result.scene
     write(paths["mesh"], s.points, s.tets, cell_data={"part": result.part.astype(np.int32), "fiber": result.fiber})
     with open(paths["parts"], "w") as f:
@@ -685,6 +691,10 @@ def write_authored(result: AuthoredScene, out_dir, *, frames: int = 20, dt: floa
                       'interpolation = "smooth"', "normalized = true", ""]
     with open(paths["scene"], "w") as f:
         f.write("\n".join(lines))
+    if picture:
+        mesh_picture(paths["picture"], s)
+    else:
+        del paths["picture"]
     return paths
 
 
@@ -709,5 +719,7 @@ def format_report(report: dict) -> str:
         out.append(f"  bone {b} has no joint: only its muscles hold it")
     for m, note in report["fibers"].items():
         out.append(f"  fibres of {m}: {note}")
+    if report.get("loop"):
+        out.append(f"  loop: {report['loop']}")
     out += [f"  defect: {d}" for d in report["defects"]]
     return "\n".join(out)

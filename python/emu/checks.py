@@ -205,7 +205,7 @@ ANCHOR_FIX = ("attach it to a fixed bone (share vertices with it), pin it (scene
 
 
 def check_anchored(num_vertices: int, tets: np.ndarray, pinned: np.ndarray, links=(), anchors=(),
-                   vertex_parts=None):
+                   vertex_parts=None, bodies=()):
     """Raise ValueError unless every connected piece of the mesh made of ``tets``
     holds a pinned vertex.
 
@@ -218,6 +218,9 @@ def check_anchored(num_vertices: int, tets: np.ndarray, pinned: np.ndarray, link
                   a fixed bone)
     vertex_parts  optional callable: vertex ids -> the names of the parts they
                   belong to (the message then names the parts of a loose piece)
+    bodies        vertex-id arrays, each moving as one rigid body (a movable
+                  bone made of several shells, e.g. ulna + radius): their
+                  pieces count as one
     """
     used = np.zeros(num_vertices, bool)
     used[tets.ravel()] = True
@@ -234,6 +237,12 @@ def check_anchored(num_vertices: int, tets: np.ndarray, pinned: np.ndarray, link
         while merged[c] != c:
             c = merged[c]
         return c
+    links = list(links)
+    for body in bodies:   # a rigid body's shells: one piece
+        shells = np.unique(comp[np.asarray(body, np.int64)])
+        first = np.flatnonzero(np.isin(comp, shells))
+        reps = first[np.unique(comp[first], return_index=True)[1]]
+        links += [(reps[0], r) for r in reps[1:]]
     for a, b in links:
         merged[root(comp[a])] = root(comp[b])
     lut = np.arange(comp.max() + 1)

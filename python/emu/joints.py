@@ -14,7 +14,8 @@ import numpy as np
 
 from .geometry import bbox_diagonal, tet_vertices
 
-__all__ = ["Joint", "JOINT_KINDS", "joint_kind", "detect_joints", "declare_joint"]
+__all__ = ["Joint", "JOINT_KINDS", "joint_kind", "detect_joints", "declare_joint", "check_declared_joints",
+           "joint_loop", "loop_note"]
 
 JOINT_KINDS = ("ball", "hinge", "weld")
 
@@ -96,3 +97,72 @@ def declare_joint(bone_names, bone: str, other: str, centre, axis=None) -> Joint
             raise ValueError(f"add_joint: axis must be a non-zero finite 3-vector, got {axis!r}")
         a = a / np.linalg.norm(a)
     return Joint(bones=(bone, other), kind="ball" if a is None else "hinge", centre=c, axis=a, declared=True)
+
+
+def check_declared_joints(points: np.ndarray, tets: np.ndarray, detected: list, declared: list) -> None:
+    """Raise ValueError where two bones joined by a declared joint also share
+    vertices: the mesh fused them where their surfaces come close (a mesher
+    merges surfaces nearer than its edge length), which would be a second
+    joint beside the declared one, or a weld.
+
+    points    (n, 3) rest positions; tets  (m, 4) vertex ids
+    detected  the joints detect_joints found; declared  the declared ones
+    The message names both bones, where they touch, and the gap the mesh
+    needs there (the longest edge of the tets at the shared vertices).
+    """
+    pairs = {frozenset(j.bones): j for j in declared}
+    for j in detected:
+        mine = pairs.get(frozenset(j.bones))
+        if mine is None:
+            continue
+        at = np.isin(tets, j.vertices).any(axis=1)
+        t = tets[at]
+        edges = np.concatenate([points[t[:, a]] - points[t[:, b]] for a, b in
+                                ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
+        gap = float(np.sqrt((edges ** 2).sum(axis=1).max()))
+        where = ", ".join(f"{v:.4g}" for v in j.centre)
+        what = {"weld": "welds them (the bones cannot move)", "hinge": "is a second hinge",
+                "ball": "is a second (ball) joint"}[j.kind]
+        raise ValueError(
+            f"bones '{j.bones[0]}' and '{j.bones[1]}' share {len(j.vertices)} vertex/vertices near "
+            f"[{where}] beside their declared {mine.kind} joint: the mesh fused them where their surfaces come "
+            f"close, which {what}. Move the surfaces at least {gap:.3g} apart there (the mesh's edge length), "
+            "e.g. a pose with the joint more open, or a finer mesh; or drop the declared joint to use the "
+            "touching vertices as the joint")
+
+
+def joint_loop(joints: list, movable) -> tuple | None:
+    """The first joint that closes a loop (two bones already joined through
+    other joints, fixed bones counting as one ground), as (bone, other), or
+    None where the joints form trees. FEM, and with it EMU's error estimate,
+    takes trees of bones only (the solvers also count pins and fixed bones a
+    bone touches, which this graph of joints leaves out).
+
+    joints   Joint list (Scene.joints())
+    movable  names of the movable bones
+    """
+    movable = set(movable)
+    parent = {}
+
+    def root(n):
+        n = n if n in movable else "<ground>"
+        while parent.get(n, n) != n:
+            n = parent[n]
+        return n
+    for j in joints:
+        a, b = j.bones
+        if a not in movable and b not in movable:
+            continue
+        ra, rb = root(a), root(b)
+        if ra == rb:
+            return a, b
+        parent[ra] = rb
+    return None
+
+
+def loop_note(pair: tuple) -> str:
+    """What a loop of joints (joint_loop's pair) means for the solvers, and the fixes."""
+    a, b = pair
+    return (f"bones '{a}' and '{b}' close a loop of joints: FEM and EMU's accuracy mode (its error estimate is "
+            "FEM's) refuse it; fix a bone of the loop, remove a joint (two touching bones moved as one: make "
+            "them one bone), or solve with EMU at a given alpha= without an estimate of its error")

@@ -11,7 +11,7 @@ from .checks import check_anchored, check_mesh, check_movable_bones, integer_ids
 from .contact import ContactSettings, check_pairs
 from .fibers import attachment_fibers, attachments, laplace_fibers
 from .geometry import tet_vertices
-from .joints import declare_joint, detect_joints
+from .joints import check_declared_joints, declare_joint, detect_joints
 from .parts import BONE_ACAP_WEIGHT, Part, default_tendon_weight, lame
 
 __all__ = ["Scene", "Part", "lame", "MeshWarning"]
@@ -159,6 +159,21 @@ class Scene:
         """{bone name: vertex ids} where the muscle shares vertices with a bone."""
         p = self._part(muscle, "muscle")
         return attachments(self.tets, p.tets, self._bones())
+
+    def tendon_attachments(self, muscle: str) -> dict:
+        """{bone name: (tendon name, vertex ids)} where a tendon sharing
+        vertices with the muscle shares vertices with a bone: the muscle's
+        attachments through its tendons (emu mesh's tendon_length puts them
+        there)."""
+        p = self._part(muscle, "muscle")
+        mine = tet_vertices(self.tets[p.tets], len(self.points))
+        out = {}
+        for t in self.parts.values():
+            if t.kind != "tendon" or not np.intersect1d(tet_vertices(self.tets[t.tets], len(self.points)), mine).size:
+                continue
+            for bone, ids in attachments(self.tets, t.tets, self._bones()).items():
+                out.setdefault(bone, (t.name, ids))
+        return out
 
     def _bones(self) -> dict:
         """{bone name: tet ids} in the scene's order."""
@@ -378,7 +393,12 @@ class Scene:
                 links.append((piece[a], piece[b]))
             elif a in piece or b in piece:
                 anchors.append(piece[a] if a in piece else piece[b])
-        check_anchored(len(self.points), self.tets[soft], pins, links, anchors, vertex_parts=self._parts_of_vertices)
+        bodies = [np.unique(self.tets[self.parts[n].tets]) for n in movable]   # a bone of several shells is one
+        check_anchored(len(self.points), self.tets[soft], pins, links, anchors, vertex_parts=self._parts_of_vertices,
+                       bodies=bodies)
+        if self.declared_joints:   # a joint the mesh made beside a declared one
+            check_declared_joints(self.points, self.tets, detect_joints(self.points, self.tets, self._bones()),
+                                  self.declared_joints)
         check_movable_bones(self.points, {n: tet_vertices(self.tets[self.parts[n].tets], len(self.points))
                                           for n in self.movable_bones}, pins)
         if not np.all(np.isfinite(self.gravity)) or np.shape(self.gravity) != (3,):

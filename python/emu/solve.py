@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, CERTIFY_CONTRACTION, DEFAULT_ACCURACY,
-                       DEFAULT_ALPHA, STEP_FRACTION, STEP_GRAD, AccuracyMode, AccuracyWarning)
+from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, CERTIFY_CONTRACTION, CERTIFY_STEPS,
+                       DEFAULT_ACCURACY, DEFAULT_ALPHA, STEP_FRACTION, STEP_GRAD, AccuracyMode, AccuracyWarning)
 from .checks import inverted_tets
 from .contact import ContactTerm
 from .geometry import bbox_diagonal, deformation_gradients, tet_vertices, vertex_error
@@ -87,9 +87,12 @@ class Solution:
                 "intersecting": False (checked)}; None otherwise
     fem_correction  EMU with an error estimate: the FEM Newton correction x1 of
                 emu_positions
-    fem_check   EMU with an error estimate: the FEM Newton correction x2 of
-                fem_correction (estimate = vertex_error(emu_positions, x2));
-                None where that step failed
+    fem_check   EMU with an error estimate: the last of the certificate's FEM
+                Newton corrections of fem_correction (x2, or x3 of x2: estimate =
+                vertex_error(emu_positions, fem_check)); None where the first
+                failed
+    fem_steps   EMU with an error estimate: [x1, x2, ...] the FEM Newton
+                corrections the estimate and its certificate computed
     error_estimate_certified  EMU with an error estimate: True where one more
                 FEM Newton step, from fem_correction, contracts (at most
                 CERTIFY_CONTRACTION of the first, or as short as FEM's own
@@ -140,6 +143,7 @@ class Solution:
     fem_correction: np.ndarray | None = field(default=None, repr=False)
     error_estimate_certified: bool | None = None
     fem_check: np.ndarray | None = field(default=None, repr=False)
+    fem_steps: list | None = field(default=None, repr=False)
     contact: dict | None = None      # scenes with contact: active pairs and minimum gap at positions
     solve_time_s: float = 0.0        # the solver's iterations alone (time_s: the whole solve)
 
@@ -357,6 +361,14 @@ class Solver:
         self.settings["fem_correction"] = self.fem_correction
         if self.scene.movable_bones:
             self.settings["bone_coordinates"] = self.bone_coordinates
+            why = self.bone_coordinates.removeprefix("per bone: ")
+            if self.accuracy is not None and ("loop of joints" in why or "welded" in why):
+                # FEM, and so the error estimate accuracy mode stands on, takes
+                # trees of bones only
+                raise ValueError(
+                    f"EMU's accuracy mode needs FEM's error estimate, which this scene does not allow: "
+                    f"{why}. To solve it as it is, give alpha= without "
+                    "accuracy (EMU turns each bone on its own there, with no estimate of its error)")
         # accuracy mode's controller (EMU): alpha per solve, answers accepted or corrected
         self._accuracy = (AccuracyMode(self.accuracy, self.fem_correction, self.alpha)
                           if self.accuracy is not None and method == "emu" else None)
@@ -600,12 +612,11 @@ class Solver:
         x1, estimate_s, note = (self._fem_correction_of(load, positions) if self.error_estimate
                                 else (None, 0.0, ""))
         estimate = None if x1 is None else vertex_error(positions, x1)
-        certified = x2 = None
+        certified, chain = None, None
         if x1 is not None:
             t1 = time.perf_counter()
-            certified, x2, why = self._certify(load, estimate, x1)
-            if x2 is not None:   # two FEM Newton steps from EMU's answer: the nearer FEM point
-                estimate = vertex_error(positions, x2)
+            certified, chain, why = self._certify(load, positions, x1)
+            estimate = vertex_error(positions, chain[-1])   # the FEM point nearest FEM's answer
             estimate_s += time.perf_counter() - t1
             note = note or why
         history["time_s"] = history["time_s"] + time_offset
@@ -622,7 +633,8 @@ class Solver:
                         phase_times=_phase_times(r, estimate_s),
                         inverted_tets=len(inverted_tets(self.scene.tets, positions)),
                         emu_positions=positions if self.method == "emu" else None, fem_correction=x1,
-                        error_estimate_certified=certified, fem_check=x2,
+                        error_estimate_certified=certified,
+                        fem_check=chain[-1] if chain and len(chain) > 1 else None, fem_steps=chain,
                         contact=self._contact_report(positions))
 
     def _contact_report(self, positions):
@@ -663,40 +675,53 @@ class Solver:
             return None, time.perf_counter() - t0, f"no error estimate: {e}"
         return x1, time.perf_counter() - t0, ""
 
-    def _certify(self, load, estimate: float, x1) -> tuple:
-        """(certified, x2, note): x2 is one more FEM Newton correction, of x1
-        (PCG on the estimator's factor: nothing factorised), and the estimate
-        |x - x2| holds where FEM's Newton is in its regime at EMU's answer x:
-        |x2 - x1| at most CERTIFY_CONTRACTION |x1 - x|, or at most
-        STEP_FRACTION x the accuracy (FEM's own accuracy stop). Where it does
-        not contract, FEM's energy is far from quadratic about x (a softly
-        resisted turn: Newton steps there cover a fraction of the way) and the
-        estimate can be several times low (docs/DESIGN.md, "The estimate's
-        certificate")."""
+    def _certify(self, load, x, x1) -> tuple:
+        """(certified, [x1, x2, ...], note): up to CERTIFY_STEPS more FEM Newton
+        corrections of x1 (PCG on the estimator's factor: nothing factorised),
+        by which the estimate |x - last| holds where FEM's Newton is in its
+        regime at EMU's answer x: each step at most CERTIFY_CONTRACTION of the
+        one before, or the last within STEP_FRACTION x the accuracy (FEM's own
+        accuracy stop; the steps end early at a tenth of it). Where they do not contract, FEM's
+        energy is far from quadratic about x (a softly resisted turn: Newton
+        steps there cover a fraction of the way each) and the estimate can be
+        several times low (docs/DESIGN.md, "The estimate's certificate")."""
+        estimate = vertex_error(x, x1)
         if estimate == 0.0:   # FEM's gradient at round-off at x: no step, nothing to certify
-            return True, x1, ""
+            return True, [x1], ""
         if self._estimator is None:   # an estimate from elsewhere (tests' stand-ins): no certificate
-            return None, None, ""
-        if self.contact is None:
-            x2 = self._correction(load, x1)
-        else:   # no lagged factor with contact (its pattern changes): a step of its own
-            try:
-                x2 = np.asarray(self._estimator.newton_correction(load, x1, max_steps=1))
-            except (RuntimeError, ValueError):
-                x2 = None
-        if x2 is None:
-            return False, None, (f"the error estimate ({estimate:.2g}) is not certified: FEM's Newton step from "
-                                 "its correction met negative curvature or did not converge (EMU's answer is not "
-                                 "in FEM's Newton regime), so the true error can be several times the estimate")
-        second = vertex_error(x1, x2)
+            return None, [x1], ""
         floor = STEP_FRACTION * (self.accuracy if self.accuracy is not None else DEFAULT_ACCURACY)
-        if second <= CERTIFY_CONTRACTION * estimate or second <= floor:
-            return True, x2, ""
-        return False, x2, (f"the error estimate ({estimate:.2g}) is not certified: a second FEM Newton step from "
-                           f"its correction moved {second:.2g} ({second / estimate:.2g} of the first; Newton's "
-                           f"regime needs at most {CERTIFY_CONTRACTION:g}): FEM's energy is far from quadratic "
-                           "about EMU's answer (a softly resisted motion), so the true error can be several times "
-                           "the estimate")
+        chain, before = [x1], estimate
+        for k in range(CERTIFY_STEPS):
+            z = self._certificate_step(load, chain[-1])
+            if z is None:
+                return False, chain, (
+                    f"the error estimate ({vertex_error(x, chain[-1]):.2g}) is not certified: FEM Newton step "
+                    f"{k + 2} from EMU's answer met negative curvature or did not converge (EMU's answer is not "
+                    "in FEM's Newton regime), so the true error can be several times the estimate")
+            step = vertex_error(chain[-1], z)
+            chain.append(z)
+            # within FEM's own stop: certified at the last step, or at once where
+            # even a tenfold next step would stay within it
+            if step <= floor and (k == CERTIFY_STEPS - 1 or step <= 0.1 * floor):
+                return True, chain, ""
+            if step > CERTIFY_CONTRACTION * before:
+                return False, chain, (
+                    f"the error estimate ({vertex_error(x, z):.2g}) is not certified: FEM Newton step {k + 2} "
+                    f"from EMU's answer moved {step:.2g}, {step / before:.2g} of the one before (Newton's regime "
+                    f"needs at most {CERTIFY_CONTRACTION:g}): FEM's energy is far from quadratic about EMU's "
+                    "answer (a softly resisted motion), so the true error can be several times the estimate")
+            before = step
+        return True, chain, ""
+
+    def _certificate_step(self, load, y):
+        """One FEM Newton correction of y for the certificate, or None."""
+        if self.contact is None:
+            return self._correction(load, y)
+        try:   # no lagged factor with contact (its pattern changes): a step of its own
+            return np.asarray(self._estimator.newton_correction(load, y, max_steps=1))
+        except (RuntimeError, ValueError):
+            return None
 
     def _fem_settle(self, load, x):
         """A FEM solve from positions x with FEM's accuracy-mode stop, on the

@@ -29,6 +29,7 @@ from .. import datasets
 from ..advice import method_hint
 from ..geometry import vertex_error
 from ..io.mesh import load_scene
+from ..joints import joint_loop, loop_note
 from ..io.vtk import write_solution
 from ..runtime import info as runtime_info
 from ..runtime import set_threads
@@ -38,6 +39,35 @@ from ..solve import Solver
 from .demo import run_demo
 from .run import accuracy_summary, run_scene
 from .scenefile import load_scene_file
+
+
+def _mesh_defects(path: str, num_tets: int) -> list:
+    """The surface defects emu mesh recorded in report.json beside the mesh
+    that ``path`` (a mesh, or a scene file naming one) loads, where that
+    report describes this mesh (the same number of tets); [] otherwise."""
+    mesh = path
+    if path.endswith((".toml", ".json")):
+        try:
+            if path.endswith(".toml"):
+                import tomllib
+                with open(path, "rb") as f:
+                    data = tomllib.load(f)
+            else:
+                with open(path) as f:
+                    data = json.load(f)
+        except (OSError, ValueError):
+            return []
+        given = data.get("mesh", {}).get("path") if isinstance(data.get("mesh"), dict) else None
+        if not isinstance(given, str):
+            return []
+        mesh = os.path.join(os.path.dirname(os.path.abspath(path)), given)
+    report = os.path.join(os.path.dirname(os.path.abspath(mesh)), "report.json")
+    try:
+        with open(report) as f:
+            r = json.load(f)
+    except (OSError, ValueError):
+        return []
+    return list(r.get("defects", [])) if r.get("tets") == num_tets else []
 
 
 def _print_info(args):
@@ -59,6 +89,8 @@ def _print_info(args):
         print(scene)
         for line in scene.mesh_report.lines():
             print("  " + line)
+        for defect in _mesh_defects(args.mesh, len(scene.tets)):
+            print(f"  surface defect (found by emu mesh): {defect}")
         for a, b, n in scene.cracks():
             print(f"  crack: {a} and {b} touch at {n} vertex pair(s) they do not share (--weld joins them)")
         for soft, bone, n, area in scene.loose_contacts():
@@ -69,7 +101,10 @@ def _print_info(args):
             print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}")
             if p.kind == "muscle":
                 att = scene.attachments(p.name)
-                desc = ", ".join(f"{b} ({len(v)} vertices)" for b, v in att.items()) or "none (pins only)"
+                desc = [f"{b} ({len(v)} vertices)" for b, v in att.items()]
+                desc += [f"{b} through {t} ({len(v)} vertices)"
+                         for b, (t, v) in scene.tendon_attachments(p.name).items() if b not in att]
+                desc = ", ".join(desc) or "none (pins only)"
                 print(f"    attachments: {desc}")
         bones = [p.name for p in scene.parts.values() if p.kind == "bone"]
         if bones:
@@ -84,6 +119,8 @@ def _print_info(args):
                 extra = f", axis {np.round(j.axis, 6).tolist()}" if j.axis is not None else ""
                 print(f"  joint {j.bones[0]} - {j.bones[1]}: {j.kind} at {where}, "
                       f"centre {np.round(j.centre, 6).tolist()}{extra}")
+            if (pair := joint_loop(scene.joints(), scene.movable_bones)) is not None:
+                print(f"  loop: {loop_note(pair)}")
         if spec is not None:
             print(f"  frames: {spec.frames} x {spec.dt:g} s; solver: {spec.solver or 'defaults'}")
             for name, curve in spec.curves.items():
@@ -323,7 +360,8 @@ def _mesh(args):
         return 2
     paths = write_authored(result, args.out)
     print(format_report(result.report))
-    print(f"wrote {paths['mesh']}, {paths['scene']} (a scene file: emu info / emu run it)")
+    print(f"wrote {paths['mesh']}, {paths['scene']} (a scene file: emu info / emu run it), "
+          f"{paths['picture']} (the parts, joints and attachments)")
     return 0
 
 
@@ -424,7 +462,8 @@ def main(argv=None):
                                     "tet mesh and a scene file (fTetWild)")
     m.add_argument("parts", help="the parts file: [mesh] tets or edge_length, [[part]] name/surface/kind, "
                                  "optional [[joint]] (emu.author)")
-    m.add_argument("--out", required=True, help="output folder: mesh.vtu, scene.json, scene.toml, report.json")
+    m.add_argument("--out", required=True,
+                   help="output folder: mesh.vtu, scene.json, scene.toml, report.json, mesh.png")
     m.add_argument("--threads", type=int, default=None, help="mesher threads (default: all cores)")
     m.add_argument("--verbose", action="store_true", help="show the mesher's own progress")
     m.set_defaults(func=_mesh)

@@ -9,7 +9,8 @@ import numpy as np
 
 from .obj import boundary_faces
 
-__all__ = ["contact_sheet", "angle_activation_plot", "default_view", "frame_title", "muscle_colour"]
+__all__ = ["contact_sheet", "mesh_picture", "angle_activation_plot", "default_view", "frame_title",
+           "muscle_colour"]
 
 PART_COLOURS = {"bone": (0.93, 0.90, 0.80), "tendon": (0.85, 0.85, 0.95), "muscle": (0.80, 0.35, 0.35)}
 
@@ -86,6 +87,81 @@ def frame_title(frame: int, time: float, bone_angles: dict) -> str:
     return f"frame {frame}, t = {time:.2f} s" + (f"\n{turn}" if turn else "")
 
 
+def _paint(ax, tri, colours, view):
+    """Draw triangles tri (f, 3, 3) with colours (f, 3) on ax: the faces
+    towards the viewer, shaded, painted back to front (depth-sorted)."""
+    from matplotlib.collections import PolyCollection
+
+    depth_axis, sign = _facing(view)
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    nrm = np.cross(e1, e2)[:, depth_axis] * sign
+    keep = np.flatnonzero(nrm > 0)
+    order = keep[np.argsort(sign * tri[keep, :, depth_axis].mean(axis=1), kind="stable")]
+    col = colours[order] * _shade(e1[order], e2[order], view)[:, None]
+    ax.add_collection(PolyCollection(tri[order][:, :, list(view)], facecolors=col, edgecolors=(0, 0, 0, 0.06),
+                                     linewidths=0.2))
+
+
+def mesh_picture(path, scene, *, view=None):
+    """The labelled mesh as `emu mesh` built it: every part in its own colour
+    (a legend names them), joints marked (a cross at the centre, a hinge's axis
+    as a line), attachments (vertices a muscle or tendon shares with a bone) as
+    dots; two views, ``view`` (default: default_view(scene)) and the one
+    turned a quarter about its up axis."""
+    plt = _pyplot()
+    from matplotlib.patches import Patch
+
+    view = tuple(default_view(scene)) if view is None else tuple(view)
+    side = (({0, 1, 2} - set(view)).pop(), view[1])
+    faces, faces_tet = boundary_faces(scene.tets, return_tets=True)
+    names = list(scene.parts)
+    palette = plt.get_cmap("tab10" if len(names) <= 10 else "tab20")
+    part_colour = {n: np.array(palette(k % palette.N)[:3]) for k, n in enumerate(names)}
+    for n, p in scene.parts.items():   # bones pale, so muscles stand out
+        if p.kind == "bone":
+            part_colour[n] = 0.45 * part_colour[n] + 0.55 * np.array(PART_COLOURS["bone"])
+    tet_colour = np.zeros((len(scene.tets), 3))
+    for n, p in scene.parts.items():
+        tet_colour[p.tets] = part_colour[n]
+    bone_verts = set()
+    for p in scene.parts.values():
+        if p.kind == "bone":
+            bone_verts.update(np.unique(scene.tets[p.tets]).tolist())
+    attach = sorted({int(v) for p in scene.parts.values() if p.kind != "bone"
+                     for v in np.unique(scene.tets[p.tets]) if int(v) in bone_verts})
+    joints = scene.joints()
+    P = scene.points
+    extent = (P.max(axis=0) - P.min(axis=0)).max()
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 4.8))
+    for ax, v in zip(axes, (view, side)):
+        ax.set_axis_off()
+        _paint(ax, P[faces], tet_colour[faces_tet], v)
+        if attach:
+            q = P[attach][:, list(v)]
+            ax.scatter(q[:, 0], q[:, 1], s=3, color="black", zorder=3, label="attachments")
+        for j in joints:
+            c = np.asarray(j.centre)
+            ax.scatter([c[v[0]]], [c[v[1]]], marker="x", s=60, color="blue", zorder=4)
+            if j.axis is not None:
+                e = 0.08 * extent * np.asarray(j.axis)
+                ax.plot([c[v[0]] - e[v[0]], c[v[0]] + e[v[0]]], [c[v[1]] - e[v[1]], c[v[1]] + e[v[1]]],
+                        color="blue", lw=1.5, zorder=4)
+            ax.annotate(f"{j.kind} {j.bones[0]}-{j.bones[1]}", (c[v[0]], c[v[1]]), fontsize=7, color="blue",
+                        xytext=(4, 4), textcoords="offset points")
+        lo, hi = P[:, list(v)].min(axis=0), P[:, list(v)].max(axis=0)
+        pad = 0.05 * (hi - lo).max()
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        ax.set_aspect("equal")
+        ax.set_title(f"{'xyz'[v[0]]} right, {'xyz'[v[1]]} up", fontsize=9)
+    handles = [Patch(color=part_colour[n], label=f"{n} ({scene.parts[n].kind})") for n in names]
+    fig.legend(handles=handles, loc="lower center", ncol=min(4, len(handles)), fontsize=8, frameon=False)
+    fig.suptitle(f"{len(scene.tets)} tets; x joints, dots attachments", fontsize=9)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0, 1), columns=None):
     """Draw solved frames side by side, looking along the axis not in ``view``.
 
@@ -97,10 +173,7 @@ def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0
                  picks one that shows the motion); the viewer looks from right x up
     """
     plt = _pyplot()
-    from matplotlib.collections import PolyCollection
-
     faces, faces_tet = boundary_faces(scene.tets, return_tets=True)
-    depth_axis, sign = _facing(view)
     n = len(frames)
     cols = columns or (n if n <= 4 else (n + 1) // 2)
     cols = min(cols, n)
@@ -119,15 +192,7 @@ def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0
         for name, v in (activations[i] if activations else {}).items():
             if name in muscles:
                 act_tet[scene.parts[name].tets] = v
-        tri = P[faces]
-        # faces towards the viewer, painted back to front (depth-sorted)
-        e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-        nrm = np.cross(e1, e2)[:, depth_axis] * sign
-        keep = np.flatnonzero(nrm > 0)
-        order = keep[np.argsort(sign * tri[keep, :, depth_axis].mean(axis=1), kind="stable")]
-        poly = tri[order][:, :, list(view)]
-        col = _face_colours(scene, faces_tet[order], act_tet) * _shade(e1[order], e2[order], view)[:, None]
-        ax.add_collection(PolyCollection(poly, facecolors=col, edgecolors=(0, 0, 0, 0.06), linewidths=0.2))
+        _paint(ax, P[faces], _face_colours(scene, faces_tet, act_tet), view)
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_aspect("equal")
