@@ -184,3 +184,40 @@ def test_cli_messages_a_user_can_act_on(tmp_path):
     warnings_ = [line for line in r.stderr.splitlines() if line.strip()]
     assert any(w.startswith("emu: warning: ") and "lies on bone 'floor'" in w for w in warnings_), r.stderr
     assert all(w.startswith("emu: warning: ") for w in warnings_), r.stderr      # nothing else: no source lines
+
+
+def test_cli_exit_status_and_arguments_a_user_reaches_for(tmp_path):
+    """--version; emu run --method fem (the scene file's method overridden);
+    a frame that does not converge makes the run exit 1 (after writing what
+    it has); a folder for a scene file, --threads 0 and a bad activation value
+    are one-line errors (exit 2); emu solve --out into a folder that does not
+    exist yet creates it."""
+    r = emu_cli("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"emu {emu.__version__}", r.stdout + r.stderr
+    scene = write(tmp_path, GOOD)
+    r = emu_cli("run", str(scene), "--out", str(tmp_path / "fem"), "--method", "fem", "--no-preview")
+    assert r.returncode == 0, r.stdout + r.stderr
+    log = json.loads((tmp_path / "fem" / "log.json").read_text())
+    assert all(f["error_estimate"] is None for f in log["frames"])   # FEM: no EMU estimate
+    assert "--method fem: leaving out the scene file's alpha (options of EMU only)" in r.stdout, r.stdout
+    assert "frame(s), fem (setup" in r.stdout, r.stdout
+    r = emu_cli("run", str(scene), "--out", str(tmp_path / "capped"), "-O", "max_iterations=1", "--no-preview")
+    assert r.returncode == 1 and "NOT converged" in r.stdout, r.stdout + r.stderr
+    assert (tmp_path / "capped" / "log.json").exists()
+    r = emu_cli("run", str(tmp_path))
+    assert r.returncode == 2 and "is a folder: give one scene file" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+    r = emu_cli("run", str(scene), "--threads", "0")
+    assert r.returncode == 2 and "at least 1" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    s, _, _ = bone_muscle_bone(0.2, r=2)
+    mesh = tmp_path / "bmb.vtu"
+    part = np.full(len(s.tets), -1)
+    for k, p in enumerate(s.parts.values()):
+        part[p.tets] = k
+    emu.io.write(mesh, s.points, s.tets, cell_data={"part": part}, part_names={0: "proximal", 1: "distal", 2: "belly"})
+    common = ["--kind", "proximal=bone", "distal=bone", "--fibers", "belly=0,0,1", "--method", "fem"]
+    r = emu_cli("solve", str(mesh), *common, "--activation", "belly=abc")
+    assert r.returncode == 2 and r.stderr.startswith("emu: error: --activation belly: 'abc' is not a number"), r.stderr
+    out = tmp_path / "new" / "deeper" / "sol.vtu"
+    r = emu_cli("solve", str(mesh), *common, "--activation", "belly=0.3", "--out", str(out), "--no-preview")
+    assert r.returncode == 0 and out.exists(), r.stdout + r.stderr

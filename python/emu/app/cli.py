@@ -31,6 +31,7 @@ from ..geometry import vertex_error
 from ..io.mesh import load_scene
 from ..joints import joint_loop, loop_note
 from ..io.vtk import write_solution
+from ..runtime import __version__
 from ..runtime import info as runtime_info
 from ..runtime import set_threads
 from ..scenes import fusiform
@@ -200,12 +201,12 @@ def _parse_activation(items, option="--activation"):
     act = {}
     for it in items or []:
         if "=" not in it:
-            raise SystemExit(f"{option} expects NAME=VALUE, got {it!r}")
+            raise ValueError(f"{option} expects NAME=VALUE, got {it!r}")
         k, v = it.split("=", 1)
         try:
             act[k] = float(v)
         except ValueError:
-            raise SystemExit(f"{option} {k}: {v!r} is not a number") from None
+            raise ValueError(f"{option} {k}: {v!r} is not a number") from None
     return act
 
 
@@ -297,6 +298,7 @@ def _solve(args):
     if hint:
         print(hint)
     if args.out:
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
         write_solution(args.out, scene, sol, activation=act, fibers=solver.fibers)
         print(f"wrote {args.out}")
         if not args.no_preview:
@@ -308,11 +310,24 @@ def _solve(args):
             contact_sheet(picture, scene, [scene.points, sol.positions], titles=["rest", "solved"],
                           activations=[rest_act, solved_act], view=default_view(scene))
             print(f"wrote {picture} (rest and solved; --no-preview skips it)")
-    return 0 if sol.converged else 1
+    return 0 if sol.converged and sol.accuracy_reached is not False else 1
 
 
 def _run(args):
+    if os.path.isdir(args.scene):
+        found = sorted(f for f in os.listdir(args.scene) if f.endswith((".toml", ".json")))
+        raise ValueError(f"{args.scene} is a folder: give one scene file"
+                         + (f", e.g. {os.path.join(args.scene, found[0])}" if found else ""))
     spec = load_scene_file(args.scene)
+    if args.method is not None and args.method != spec.solver.get("method", "emu"):
+        spec.solver["method"] = args.method
+        # the scene file's options for the other method do not apply (-O ones are still checked)
+        dropped = [k for k in list(spec.solver) if k in OPTIONS and args.method not in OPTIONS[k].methods]
+        for k in dropped:
+            del spec.solver[k]
+        if dropped:
+            print(f"--method {args.method}: leaving out the scene file's {', '.join(dropped)} "
+                  f"(options of {'EMU' if args.method == 'fem' else 'FEM'} only)")
     if args.threads:
         spec.solver["threads"] = args.threads
     if args.accuracy is not None:
@@ -334,7 +349,7 @@ def _run(args):
         print(f"accuracy: {summary}")
     if log["interrupted"]:
         return 130
-    return 0 if all(f["converged"] for f in log["frames"]) else 1
+    return 0 if all(f["converged"] and f.get("accuracy_reached") is not False for f in log["frames"]) else 1
 
 
 def _sweep(args):
@@ -393,8 +408,24 @@ def _part_options(p):
                    help="merge vertices at the same point (parts meshed apart; vertex ids change)")
 
 
+THREADS_HELP = "solver threads, at least 1 (default: OMP_NUM_THREADS, else all cores)"
+
+
+def _threads(text: str) -> int:
+    """--threads: a positive integer (argparse's type)."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number of threads, at least 1, got {text!r} "
+                                         "(leave it out for the default)")
+    return n
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="emu", description="EMU muscle simulation (and its FEM reference)")
+    ap.add_argument("--version", action="version", version=f"emu {__version__}")
     sub = ap.add_subparsers(dest="cmd", required=True)
     d = sub.add_parser("demo", help="the built-in arm: a flexor then an extensor swing the forearm about the "
                                     "elbow; frames, PNG contact sheet, angle plot, EMU vs FEM")
@@ -406,14 +437,14 @@ def main(argv=None):
     d.add_argument("--accuracy", type=float, default=None,
                    help="vertex error to FEM wanted (default 0.01 unless --alpha is given)")
     d.add_argument("--no-fem", action="store_true", help="skip the FEM reference solves")
-    d.add_argument("--threads", type=int, default=None)
+    d.add_argument("--threads", type=_threads, default=None, help=THREADS_HELP)
     d.set_defaults(func=_demo)
     d = sub.add_parser("compare", help="contract a fusiform muscle with FEM and EMU at one activation, write VTU")
     d.add_argument("--out", default="emu_compare", help="output folder (default: emu_compare)")
     d.add_argument("--tets", type=int, default=8000, help="approximate tet count (default 8000)")
     d.add_argument("--activation", type=float, default=5e4, help="absolute activation a (default 5e4)")
     d.add_argument("--alpha", type=float, default=100.0, help="EMU alpha relative to the muscle's shear modulus")
-    d.add_argument("--threads", type=int, default=None)
+    d.add_argument("--threads", type=_threads, default=None, help=THREADS_HELP)
     d.add_argument("--woodbury", action="store_true", help="also run the paper's Woodbury quasi-Newton step")
     d.set_defaults(func=_compare)
     s = sub.add_parser("solve", help="solve a labelled mesh at one activation (bones fixed unless --free-bones)")
@@ -424,23 +455,27 @@ def main(argv=None):
                    help="activations as fractions (0-1) of each muscle's maximum, as in scene files")
     s.add_argument("--absolute-activation", nargs="*", metavar="NAME=A",
                    help="absolute activations (the stress a fully shortened fibre adds, in the mesh's units)")
-    s.add_argument("--method", choices=["emu", "fem"], default="emu")
-    s.add_argument("--step", choices=CHOICES["step"], default=CHOICES["step"][0])
+    s.add_argument("--method", choices=["emu", "fem"], default="emu",
+                   help="emu (the default) or fem, the reference Newton solver of the same energy")
+    s.add_argument("--step", choices=CHOICES["step"], default=CHOICES["step"][0],
+                   help="EMU's step (default newton-krylov; the others are for comparison: docs/guide/options.md)")
     s.add_argument("--alpha", type=float, default=None,
                    help="EMU alpha relative to the softest muscle's shear modulus, fixed (default: chosen for "
                         "--accuracy, 0.01 unless --alpha is given)")
     s.add_argument("--accuracy", type=float, default=None,
                    help="vertex error to FEM wanted (0.01: 1%% of the diagonal): picks alpha, stops when steps no "
                         "longer matter")
-    s.add_argument("--threads", type=int, default=None)
+    s.add_argument("--threads", type=_threads, default=None, help=THREADS_HELP)
     _option_argument(s)
     s.add_argument("--out", default=None, help="write the result here (.vtu) and a preview picture beside it (.png)")
     s.add_argument("--no-preview", action="store_true", help="with --out: do not write the preview picture")
     s.set_defaults(func=_solve)
     r = sub.add_parser("run", help="run a scene file (TOML/JSON) over its frames")
-    r.add_argument("scene")
+    r.add_argument("scene", help="the scene file (TOML or JSON; docs/guide/scene-files.md)")
     r.add_argument("--out", default=None, help="output folder (default: the scene's output.dir)")
-    r.add_argument("--threads", type=int, default=None)
+    r.add_argument("--method", choices=["emu", "fem"], default=None,
+                   help="override the scene file's solver.method (default: the file's, else emu)")
+    r.add_argument("--threads", type=_threads, default=None, help=THREADS_HELP)
     r.add_argument("--accuracy", type=float, default=None,
                    help="override the scene file's solver.accuracy (vertex error to FEM wanted, e.g. 0.01)")
     _option_argument(r, "; overrides the scene file's [solver] table")
@@ -455,7 +490,7 @@ def main(argv=None):
     w.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (default: a local "
                                                      "cluster on this machine)")
     w.add_argument("--workers", type=int, default=None, help="local workers (default: cores // threads)")
-    w.add_argument("--threads", type=int, default=None, help="solver threads per case (default: the sweep "
+    w.add_argument("--threads", type=_threads, default=None, help="solver threads per case (default: the sweep "
                                                              "file's, 1)")
     w.set_defaults(func=_sweep)
     m = sub.add_parser("mesh", help="mesh one closed surface per part (a parts file, TOML) into one labelled "
@@ -464,7 +499,7 @@ def main(argv=None):
                                  "optional [[joint]] (emu.author)")
     m.add_argument("--out", required=True,
                    help="output folder: mesh.vtu, scene.json, scene.toml, report.json, mesh.png")
-    m.add_argument("--threads", type=int, default=None, help="mesher threads (default: all cores)")
+    m.add_argument("--threads", type=_threads, default=None, help="mesher threads (default: all cores)")
     m.add_argument("--verbose", action="store_true", help="show the mesher's own progress")
     m.set_defaults(func=_mesh)
     i = sub.add_parser("info", help="BLAS, threads; with a mesh or scene file: parts, attachments, defects, "
@@ -481,7 +516,7 @@ def main(argv=None):
     warnings.showwarning = _show_warning
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError, NotImplementedError, ImportError, datasets.DatasetError) as e:
+    except (ValueError, OSError, NotImplementedError, ImportError, datasets.DatasetError) as e:
         print(f"emu: error: {e}", file=sys.stderr)
         return 2
     finally:
