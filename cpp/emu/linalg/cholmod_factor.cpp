@@ -159,7 +159,14 @@ void CholmodFactor::solve(const double* b, double* x, int nrhs, bool single_prec
   B.x = const_cast<double*>(b);
   B.xtype = CHOLMOD_REAL;
   B.dtype = CHOLMOD_DOUBLE;
-  cholmod_solve2(CHOLMOD_A, L_, &B, nullptr, &X_, nullptr, &Y_, &E_, &common_);
+  {
+    // the same rule as factorize: on small factors OpenBLAS's worker, woken
+    // by the solve's dtrsv / dgemv, contends with the spinning OpenMP team
+    // (DESIGN.md, "OpenBLAS's threads on small factors": the error estimate's
+    // PCG, one solve per iteration, 2.5x slower at two threads without it)
+    const BlasThreadsScope blas(L_->is_super && L_->xsize >= kThreadedBlasFactorEntries ? 0 : 1);
+    cholmod_solve2(CHOLMOD_A, L_, &B, nullptr, &X_, nullptr, &Y_, &E_, &common_);
+  }
   check("solve");
   std::memmove(x, X_->x, sizeof(double) * n_ * nrhs);
 }
