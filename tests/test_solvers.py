@@ -463,3 +463,21 @@ def test_emu_solve_takes_what_solver_solve_takes():
     two = emu.Solver(s, "fem").solve({"belly": 0.2}, normalized=True, pin_positions=moved)
     np.testing.assert_allclose(one.positions[s.pinned], moved, atol=1e-12)
     np.testing.assert_allclose(one.positions, two.positions, atol=1e-10)
+
+
+def test_an_absolute_activation_that_looks_normalised_is_warned_about():
+    """{"flexor": 0.4} without normalized=True is 0.4 stress units, 4e-6 of
+    the muscle's maximum: a warning names the muscle and normalized=True, once
+    per Solver and muscle; a fraction with normalized=True, a realistic
+    absolute value and zero are silent."""
+    s = emu.scenes.arm(1)
+    for method in ("fem", "emu"):
+        solver = emu.Solver(s, method)
+        with pytest.warns(emu.ActivationWarning, match=r"activation 0.4 of 'flexor' is absolute.*normalized=True"):
+            solver.load_case({"flexor": 0.4})
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", emu.ActivationWarning)
+            solver.load_case({"flexor": 0.4})                       # once per Solver and muscle
+            solver.load_case({"flexor": 0.4, "extensor": 0.0})
+            solver.load_case({"extensor": 0.4}, normalized=True)
+            solver.load_case({"extensor": 4e4})

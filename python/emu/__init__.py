@@ -18,7 +18,7 @@ from .parts import Part, lame
 from .poses import pose_about, rotation
 from .runtime import __version__, info
 from .scene import MeshWarning, Scene
-from .solve import AccuracyWarning, NeutralModeWarning, Solution, Solver, solve
+from .solve import AccuracyWarning, ActivationWarning, NeutralModeWarning, Solution, Solver, solve
 from .options import AccuracyOptions, EmuOptions, FemOptions, NewtonOptions, StoppingOptions
 from .bones import bone_angle, bone_motion, rigid_fit, signed_angle
 from .contact import ContactWarning
@@ -28,4 +28,4 @@ from . import activation, anatomy, bones, contact, datasets, fibers, geometry, i
 __all__ = ["Scene", "Part", "Joint", "MeshWarning", "lame", "Solver", "Solution", "solve", "StoppingOptions",
            "AccuracyOptions", "NewtonOptions", "EmuOptions", "FemOptions", "rotation", "pose_about",
            "io", "meshes", "scenes", "datasets", "fibers", "info", "vertex_error", "error_history", "time_to_error", "bbox_diagonal", "inverted_tets", "bone_angle", "bone_motion", "rigid_fit",
-           "signed_angle", "NeutralModeWarning", "AccuracyWarning", "ContactWarning", "contact", "sweep", "__version__"]
+           "signed_angle", "NeutralModeWarning", "AccuracyWarning", "ActivationWarning", "ContactWarning", "contact", "sweep", "__version__"]

@@ -23,12 +23,23 @@ from .poses import parse_pose
 from .runtime import set_threads
 from .scene import Scene
 
-__all__ = ["Solver", "Solution", "solve", "METHODS", "STEPS", "NeutralModeWarning", "AccuracyWarning"]
+__all__ = ["Solver", "Solution", "solve", "METHODS", "STEPS", "NeutralModeWarning", "AccuracyWarning",
+           "ActivationWarning"]
 
 
 class NeutralModeWarning(UserWarning):
     """A movable bone can turn (or slide) with nothing resisting it: its
     equilibrium is not unique (see Solution.neutral_modes)."""
+
+
+class ActivationWarning(UserWarning):
+    """An absolute activation that looks like a fraction of the muscle's
+    maximum (normalized=True forgotten)."""
+
+
+# An absolute activation in (0, 1] at most this fraction of the muscle's
+# maximum is almost surely a fraction meant with normalized=True.
+NORMALIZED_LOOKALIKE = 1e-3
 
 
 STEPS = CHOICES["step"]
@@ -375,6 +386,7 @@ class Solver:
         self._estimator = None       # FEM's Newton system for the error estimate, built at first use
         self._observers = (None, None)   # (on_iteration, iterates) of the solve in progress
         self._estimator_error = ""   # why there is none (a scene FEM does not handle)
+        self._warned_activation = set()   # muscles whose normalised-looking activation was warned about
 
     def _named(self, make, *args):
         """make(*args) with the C++ core's bone numbers in its errors replaced by
@@ -405,10 +417,17 @@ class Solver:
             v = float(v)
             if not math.isfinite(v) or v < 0:
                 raise ValueError(f"activation of '{name}' must be finite and >= 0, got {v}")
+            top = self.scene.parts[name].max_activation
             if normalized:
                 if v > 1:
                     raise ValueError(f"normalised activation of '{name}' must lie in [0, 1], got {v}")
-                v *= self.scene.parts[name].max_activation
+                v *= top
+            elif 0 < v <= 1 and v <= NORMALIZED_LOOKALIKE * top and name not in self._warned_activation:
+                self._warned_activation.add(name)
+                warnings.warn(ActivationWarning(
+                    f"activation {v:g} of '{name}' is absolute (a stress in the mesh's units; the muscle's "
+                    f"maximum is {top:g}), so it barely acts: for a fraction of the maximum pass "
+                    "normalized=True (scene files and --activation take fractions)"), stacklevel=3)
             a[names.index(name)] = v
         return a
 
