@@ -189,3 +189,18 @@ def test_the_cli_takes_any_option(tmp_path, capsys):
     assert log["frames"][1]["iterations"] <= 1
     assert main(["run", str(scene_file), "--out", str(tmp_path / "b"), "-O", "lagged_factor=true"]) == 2
     assert "lagged_factor is an option of FEM only" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("group, kw, message", [
+    ("StoppingOptions", {"rtol_grad": "x"}, "StoppingOptions: rtol_grad takes float, got 'x'"),
+    ("StoppingOptions", {"max_iterations": 2.5}, "max_iterations takes int or None, got 2.5"),
+    ("StoppingOptions", {"max_iterations": True}, "max_iterations takes int or None, got True"),
+])
+def test_an_option_group_checks_its_values_when_built(group, kw, message):
+    """A wrong type fails where the group is made, not first in a Solver; an
+    int serves a float option, None an optional one."""
+    cls = getattr(emu, group)
+    with pytest.raises(TypeError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        cls(**kw)
+    assert cls(rtol_grad=1).given() == {"rtol_grad": 1}
+    cls(max_iterations=None)   # the table's None-able options take None

@@ -17,6 +17,8 @@ import difflib
 import inspect
 from dataclasses import dataclass
 
+import numpy as np
+
 from . import _core
 from .accuracy import STEP_FRACTION
 
@@ -164,9 +166,32 @@ class OptionGroup:
                 if getattr(self, f.name) != OPTIONS[f.name].default}
 
 
+def _value_fits(v, types: tuple) -> bool:
+    """Whether v is of one of the table's types (an int serves a float; a bool
+    serves neither)."""
+    for t in types:
+        if t is type(None) and v is None:
+            return True
+        if t is bool and isinstance(v, (bool, np.bool_)):
+            return True
+        if t in (int, float) and isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)):
+            return True
+        if t is float and isinstance(v, (float, np.floating)):
+            return True
+        if t is str and isinstance(v, str):
+            return True
+    return False
+
+
 def _check_group_values(self) -> None:
+    """An option group's values checked when it is built (the type the table
+    gives, a choice among its choices), not first when a Solver sees them."""
     for f in dataclasses.fields(self):
         o, v = OPTIONS[f.name], getattr(self, f.name)
+        types = o.type if isinstance(o.type, tuple) else (o.type,)
+        if v is not o.default and not _value_fits(v, types):
+            want = " or ".join("None" if t is type(None) else t.__name__ for t in types)
+            raise TypeError(f"{type(self).__name__}: {f.name} takes {want}, got {v!r}")
         if o.choices and v not in o.choices:
             raise ValueError(f"{f.name} must be one of {', '.join(map(repr, o.choices))}, got {v!r}")
 
