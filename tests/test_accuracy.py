@@ -94,6 +94,7 @@ def test_an_estimate_that_does_not_certify_itself_is_settled_by_fem(monkeypatch)
         sol = solver.solve(act)
     assert sol.converged and sol.corrected and sol.error_estimate_certified is False
     assert "settled by a FEM solve" in sol.error_estimate_note and sol.accuracy_reached
+    assert "did not certify itself: its answer settled by a FEM solve" in sol.summary()
     true = emu.vertex_error(sol, fem)
     assert true <= 0.01 and sol.error_estimate >= 0.5 * true
     # the next solve's alpha: raised as a re-solve's would be, from the distance settled

@@ -166,7 +166,9 @@ class Solution:
             est += f", estimated error to FEM {self.error_estimate:.1e} of the diagonal"
         if self.accuracy_reached is False:
             est += f" ({self.error_estimate_note})"
-        if self.corrected:
+        if self.corrected and self.error_estimate_certified is False:
+            est += " (EMU's estimate did not certify itself: its answer settled by a FEM solve)"
+        elif self.corrected:
             est += " (EMU's answer corrected by FEM Newton steps)"
         return (f"{self.label}: {state} in {self.iterations} iterations{cg}, "
                 f"{self.time_s:.3f} s{self._parts()} (+{self.setup_time_s:.3f} s setup), |g|/|g0| = "
