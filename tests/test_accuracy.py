@@ -145,7 +145,7 @@ def test_correct_on_synthetic_corrections():
 
     def run(own, steps):
         solver._estimator = Corrections(steps)
-        trial = dataclasses.replace(sol, positions=x, fem_correction=at(own), fem_check=None, fem_steps=None,
+        trial = dataclasses.replace(sol, positions=x, fem_correction=at(own), fem_steps=None,
                                     error_estimate=emu.vertex_error(x, at(own)), corrected=False)
         return solver._accuracy.correct(solver, load, trial), trial, solver._estimator.calls
 

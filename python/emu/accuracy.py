@@ -5,8 +5,8 @@ the error to FEM (FEM's Newton correction x1 of EMU's answer x), and while
 the estimate is above ACCEPT x e either return EMU's answer corrected by
 FEM Newton steps (where those steps certify themselves: they contract, or
 one is as short as FEM's own accuracy stop asks) or raise alpha and solve
-again from x1; where the estimate cannot certify itself (a second FEM Newton
-step does not contract) settle the answer by a FEM solve from it; then carry
+again from x1; where the estimate cannot certify itself (its further FEM
+Newton steps do not contract) settle the answer by a FEM solve from it; then carry
 an alpha over to the next solve. docs/DESIGN.md,
 "Accuracy as the knob" and "Accuracy mode as shipped", measure every rule here.
 
@@ -193,13 +193,12 @@ class AccuracyMode:
     def settle(self, port, load, sol) -> bool:
         """EMU's estimate not certified (sol.error_estimate_certified False):
         the answer settled by a FEM solve to FEM's own accuracy stop, from the
-        certificate's x2 (else x1); its estimate FEM's last step where the
+        certificate's last correction (fem_steps[-1]); its estimate FEM's last step where the
         steps halve, else the last two summed (a bound). The next solve's alpha is raised as
         a re-solve's would be from the distance settled (EMU's answers near
         the target make the settling short). False (the solution unchanged)
         where that solve fails."""
-        start = sol.fem_check if sol.fem_check is not None else sol.fem_correction
-        settled = port._fem_settle(load, start)
+        settled = port._fem_settle(load, sol.fem_steps[-1])
         if settled is None:
             return False
         r, steps = settled
@@ -221,7 +220,7 @@ class AccuracyMode:
         if not self.warned_settle:
             self.warned_settle = True
             warnings.warn(AccuracyWarning(
-                f"EMU's error estimate could not certify itself (a second FEM Newton step from EMU's answer did "
+                f"EMU's error estimate could not certify itself (its FEM Newton steps from EMU's answer did "
                 f"not contract: FEM's energy is far from quadratic there, e.g. a softly resisted turn); the answer "
                 f"was settled by a FEM solve from EMU's, {distance:.2g} from it where the estimate read {own:.2g}. "
                 "Such answers are settled so (Solution.corrected, error_estimate_note); where most are, "
@@ -267,9 +266,9 @@ class AccuracyMode:
         to choose the next alpha by), else (False, None)."""
         target = self.target
         x, x1 = sol.positions, sol.fem_correction
-        own = None if x1 is None else vertex_error(x, x1)
         if x1 is None:
             return False, None
+        own = vertex_error(x, x1)
         points = list(sol.fem_steps) if sol.fem_steps else [x1]   # the estimate's and certificate's own steps
         if len(points) == 1:
             if (x2 := port._correction(load, x1)) is None:

@@ -78,10 +78,10 @@ class Solution:
                 per iterate, the start first (see emu.error_history)
     error_estimate  EMU: the estimated vertex error to the converged FEM answer
                 (the measure of emu.vertex_error): the distance from EMU's
-                positions to two Newton corrections of the FEM energy from them,
-                fem_check (docs/DESIGN.md: how it was validated; see
-                error_estimate_certified); None for FEM, or where it is not
-                available (error_estimate_note says why)
+                positions to the last of up to three Newton corrections of the
+                FEM energy from them, fem_steps[-1] (docs/DESIGN.md: how it was
+                validated; see error_estimate_certified); None for FEM, or where
+                it is not available (error_estimate_note says why)
     inverted_tets  how many tets are inverted or collapsed at ``positions``
                 (emu.inverted_tets lists them)
     emu_positions  EMU: its own answer, the ACAP fit x*(F) of its unknowns F
@@ -98,20 +98,21 @@ class Solution:
                 "intersecting": False (checked)}; None otherwise
     fem_correction  EMU with an error estimate: the FEM Newton correction x1 of
                 emu_positions
-    fem_check   EMU with an error estimate: the last of the certificate's FEM
-                Newton corrections of fem_correction (x2, or x3 of x2: estimate =
-                vertex_error(emu_positions, fem_check)); None where the first
-                failed
     fem_steps   EMU with an error estimate: [x1, x2, ...] the FEM Newton
-                corrections the estimate and its certificate computed
-    error_estimate_certified  EMU with an error estimate: True where one more
-                FEM Newton step, from fem_correction, contracts (at most
-                CERTIFY_CONTRACTION of the first, or as short as FEM's own
-                accuracy stop): FEM's Newton is in its regime at EMU's answer and
-                the estimate holds; False where it does not (a softly resisted
-                turn, a valley far from quadratic: the estimate can be several
-                times low; accuracy mode then settles the answer by a FEM solve
-                from it, and error_estimate_note says so); None without an estimate
+                corrections the estimate and its certificate computed (x1 is
+                fem_correction; the estimate is vertex_error(emu_positions,
+                fem_steps[-1]))
+    fem_check   (a property) fem_steps[-1] where the certificate took a step
+                beyond x1, else None
+    error_estimate_certified  EMU with an error estimate: True where the
+                certificate's FEM Newton steps after x1 each contract (at most
+                CERTIFY_CONTRACTION of the one before, or the last as short as
+                FEM's own accuracy stop): FEM's Newton is in its regime at EMU's
+                answer and the estimate holds; False where they do not (a
+                softly resisted turn, a valley far from quadratic: the estimate
+                can be several times low; accuracy mode then settles the answer
+                by a FEM solve from it, and error_estimate_note says so); None
+                without an estimate
     accuracy_reached  EMU with ``accuracy=``: whether the error estimate ended
                 within the accuracy asked for (False: an AccuracyWarning, and
                 error_estimate_note says by how much it missed); None otherwise
@@ -153,10 +154,14 @@ class Solution:
     corrected: bool = False
     fem_correction: np.ndarray | None = field(default=None, repr=False)
     error_estimate_certified: bool | None = None
-    fem_check: np.ndarray | None = field(default=None, repr=False)
     fem_steps: list | None = field(default=None, repr=False)
     contact: dict | None = None      # scenes with contact: active pairs and minimum gap at positions
     solve_time_s: float = 0.0        # the solver's iterations alone (time_s: the whole solve)
+
+    @property
+    def fem_check(self) -> np.ndarray | None:
+        """The certificate's last FEM Newton correction beyond x1 (None: none taken)."""
+        return self.fem_steps[-1] if self.fem_steps and len(self.fem_steps) > 1 else None
 
     def summary(self) -> str:
         cg = f" ({self.cg_iterations} CG)" if self.cg_iterations else ""
@@ -632,8 +637,7 @@ class Solver:
         positions = np.asarray(r.positions)
         x1, estimate_s, note = (self._fem_correction_of(load, positions) if self.error_estimate
                                 else (None, 0.0, ""))
-        estimate = None if x1 is None else vertex_error(positions, x1)
-        certified, chain = None, None
+        estimate, certified, chain = None, None, None
         if x1 is not None:
             t1 = time.perf_counter()
             certified, chain, why = self._certify(load, positions, x1)
@@ -654,8 +658,7 @@ class Solver:
                         phase_times=_phase_times(r, estimate_s),
                         inverted_tets=len(inverted_tets(self.scene.tets, positions)),
                         emu_positions=positions if self.method == "emu" else None, fem_correction=x1,
-                        error_estimate_certified=certified,
-                        fem_check=chain[-1] if chain and len(chain) > 1 else None, fem_steps=chain,
+                        error_estimate_certified=certified, fem_steps=chain,
                         contact=self._contact_report(positions))
 
     def _contact_report(self, positions):

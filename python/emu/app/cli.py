@@ -42,33 +42,16 @@ from .run import accuracy_summary, run_scene
 from .scenefile import load_scene_file
 
 
-def _mesh_defects(path: str, num_tets: int) -> list:
-    """The surface defects emu mesh recorded in report.json beside the mesh
-    that ``path`` (a mesh, or a scene file naming one) loads, where that
-    report describes this mesh (the same number of tets); [] otherwise."""
-    mesh = path
-    if path.endswith((".toml", ".json")):
-        try:
-            if path.endswith(".toml"):
-                import tomllib
-                with open(path, "rb") as f:
-                    data = tomllib.load(f)
-            else:
-                with open(path) as f:
-                    data = json.load(f)
-        except (OSError, ValueError):
-            return []
-        given = data.get("mesh", {}).get("path") if isinstance(data.get("mesh"), dict) else None
-        if not isinstance(given, str):
-            return []
-        mesh = os.path.join(os.path.dirname(os.path.abspath(path)), given)
-    report = os.path.join(os.path.dirname(os.path.abspath(mesh)), "report.json")
+def _mesh_defects(mesh: str, num_tets: int) -> list:
+    """The surface defects emu mesh recorded in report.json beside ``mesh``
+    (a mesh file), where that report describes this mesh (the same number of
+    tets); [] otherwise."""
     try:
-        with open(report) as f:
-            r = json.load(f)
+        with open(os.path.join(os.path.dirname(os.path.abspath(mesh)), "report.json")) as f:
+            report = json.load(f)
     except (OSError, ValueError):
         return []
-    return list(r.get("defects", [])) if r.get("tets") == num_tets else []
+    return list(report.get("defects", [])) if report.get("tets") == num_tets else []
 
 
 def _print_info(args):
@@ -82,15 +65,16 @@ def _print_info(args):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 spec = load_scene_file(args.mesh)
-            scene = spec.scene
+            scene, mesh_file = spec.scene, spec.mesh_path
         else:
+            mesh_file = mesh_path(args.mesh)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                scene = load_scene(mesh_path(args.mesh), warn=False, **_parse_parts(args.kind, args.fibers, args.weld))
+                scene = load_scene(mesh_file, warn=False, **_parse_parts(args.kind, args.fibers, args.weld))
         print(scene)
         for line in scene.mesh_report.lines():
             print("  " + line)
-        for defect in _mesh_defects(args.mesh, len(scene.tets)):
+        for defect in (_mesh_defects(mesh_file, len(scene.tets)) if mesh_file else []):
             print(f"  surface defect (found by emu mesh): {defect}")
         for a, b, n in scene.cracks():
             print(f"  crack: {a} and {b} touch at {n} vertex pair(s) they do not share (--weld joins them)")

@@ -159,6 +159,7 @@ class SceneSpec:
     output: dict = field(default_factory=lambda: {"dir": "emu_run", "vtu": True, "obj": True, "preview": True,
                                                   "view": None, "usd": False})
     source: str = ""
+    mesh_path: str = ""                   # the mesh file mesh.path / mesh.dataset loaded ("" for built-in scenes)
 
     def bone_poses(self, frame: int) -> dict:
         """{bone: (R, t)} of the scripted bones at a frame."""
@@ -251,6 +252,7 @@ def load_scene_file(path) -> SceneSpec:
     for key in ("fibers", "weld"):
         if key in mesh and not ("path" in mesh or "dataset" in mesh):
             raise SceneFileError(f"mesh.{key} applies to mesh.path or mesh.dataset only")
+    mpath = ""
     if "path" in mesh or "dataset" in mesh:
         if "path" in mesh:
             mpath = mesh["path"] if os.path.isabs(mesh["path"]) else os.path.join(base, mesh["path"])
@@ -415,4 +417,4 @@ def load_scene_file(path) -> SceneSpec:
                                  f"\"yz\"), got {v!r}")
         output["view"] = tuple("xyz".index(c) for c in v)
     return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, bones=bones, output=output,
-                     source=path)
+                     source=path, mesh_path=mpath)

@@ -123,12 +123,10 @@ def mesh_picture(path, scene, *, view=None):
     tet_colour = np.zeros((len(scene.tets), 3))
     for n, p in scene.parts.items():
         tet_colour[p.tets] = part_colour[n]
-    bone_verts = set()
-    for p in scene.parts.values():
-        if p.kind == "bone":
-            bone_verts.update(np.unique(scene.tets[p.tets]).tolist())
-    attach = sorted({int(v) for p in scene.parts.values() if p.kind != "bone"
-                     for v in np.unique(scene.tets[p.tets]) if int(v) in bone_verts})
+    def vertices_of(bones: bool):
+        tets = [p.tets for p in scene.parts.values() if (p.kind == "bone") == bones]
+        return np.unique(scene.tets[np.concatenate(tets)]) if tets else np.zeros(0, np.int64)
+    attach = np.intersect1d(vertices_of(True), vertices_of(False))   # bone vertices a soft part shares
     joints = scene.joints()
     P = scene.points
     extent = (P.max(axis=0) - P.min(axis=0)).max()
@@ -136,7 +134,7 @@ def mesh_picture(path, scene, *, view=None):
     for ax, v in zip(axes, (view, side)):
         ax.set_axis_off()
         _paint(ax, P[faces], tet_colour[faces_tet], v)
-        if attach:
+        if len(attach):
             q = P[attach][:, list(v)]
             ax.scatter(q[:, 0], q[:, 1], s=3, color="black", zorder=3, label="attachments")
         for j in joints:
