@@ -36,12 +36,19 @@ def shared_raw() -> Path:
     return SHARED_RAW
 
 
+# arm26's files from opensim-models (CC BY 3.0, credit in tests/data/README.md), kept in the
+# repository: every machine tests the arm26 path offline
+OPENSIM_FILES = Path(__file__).resolve().parent / "data" / "opensim-models"
+
+
 @pytest.fixture(scope="session", autouse=True)
 def research_scenes_offline(tmp_path_factory):
     """emu.datasets (scene files' mesh.dataset, `emu data`) reads the shared copy
-    of the authors' files instead of the network, into a cache of the session's
-    own; a test that needs them calls shared_raw() first to skip without them."""
+    of the authors' files and the repository's copy of arm26's instead of the
+    network, into a cache of the session's own; a test that needs the authors'
+    files calls shared_raw() first to skip without them."""
     mp = pytest.MonkeyPatch()
+    mp.setenv("EMU_OPENSIM_DIR", str(OPENSIM_FILES))
     if (SHARED_RAW / "Scripts").is_dir():
         mp.setenv("EMU_DATA_DIR", str(SHARED_RAW))
     mp.setenv("EMU_CACHE_DIR", str(tmp_path_factory.mktemp("emu_cache")))

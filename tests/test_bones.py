@@ -181,6 +181,8 @@ def test_movable_bone_errors(small_arm):
     w.add_muscle("m", lab == 2, [1, 0, 0])
     with pytest.raises(ValueError, match="weld"):
         emu.Solver(w, "fem")
+    with pytest.raises(ValueError, match="a weld"):   # EMU refuses what FEM refuses
+        emu.Solver(w, "emu")
 
 
 def test_joint_between_two_movable_bones(small_arm):
@@ -782,7 +784,9 @@ def test_emu_refuses_a_loop_of_joints_in_accuracy_mode():
     and accuracy mode (EMU's default) refuses it too, naming the loop, FEM's
     fix and the way to solve it without an estimate (alpha=)."""
     s = bone_loop_scene()
-    for kw in ({}, {"accuracy": 0.01}):
+    # joint_coordinates=False: the loop is still named (the bone forest's own reason, not the
+    # coordinates' description)
+    for kw in ({}, {"accuracy": 0.01}, {"joint_coordinates": False}):
         with pytest.raises(ValueError, match=r"accuracy mode needs FEM's error estimate.*'b' and 'c' close a "
                                              r"loop of joints.*give alpha= without accuracy"):
             emu.Solver(s, "emu", **kw)

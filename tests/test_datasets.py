@@ -113,8 +113,9 @@ def test_download_convert_cache_via_file_url(env, monkeypatch):
     pytest.importorskip("pooch")
     monkeypatch.setenv("EMU_DATA_URL", RAW.as_uri())        # file:///.../raw/fast_muscles
     msgs = []
-    paths = datasets.fetch(progress=msgs.append)
-    assert sorted(paths) == datasets.names() == ["big_muscle", "realistic_biceps", "simple_joint"]
+    authors = ["big_muscle", "realistic_biceps", "simple_joint"]
+    paths = datasets.fetch(authors, progress=msgs.append)
+    assert sorted(paths) == authors and datasets.names() == ["arm26"] + authors
     assert any(m.startswith("downloading file://") for m in msgs)
     cache = Path(os.environ["EMU_CACHE_DIR"])
     for name, vtu in paths.items():
@@ -178,7 +179,7 @@ def test_hash_mismatch_is_an_error(env, monkeypatch):
 
 
 def test_unknown_name_lists_the_known_ones(env):
-    with pytest.raises(ValueError, match="known datasets: big_muscle, realistic_biceps, simple_joint"):
+    with pytest.raises(ValueError, match="known datasets: arm26, big_muscle, realistic_biceps, simple_joint"):
         datasets.path("biceps")
     with pytest.raises(datasets.UnknownDatasetError):
         datasets.fetch(["simple_joint", "nope"])      # checked before anything is fetched

@@ -25,7 +25,7 @@ LAYERS = {
     # solving a scene and measuring a solution
     "solve": {"accuracy", "advice", "solve", "bones", "options"},
     # files in and out (never the solver)
-    "io": {"io", "io.mesh", "io.vtk", "io.obj", "io.plots", "io.usd", "datasets", "author", "anatomy"},
+    "io": {"io", "io.mesh", "io.vtk", "io.obj", "io.plots", "io.usd", "datasets", "author", "anatomy", "arm26"},
     # the application: command line, scene files, runs, the demo
     "app": {"app", "app.cli", "app.run", "app.demo", "app.scenefile", "app.sweep"},
     # the public facade and the import paths the README and pyproject.toml name

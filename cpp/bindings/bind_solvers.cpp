@@ -149,6 +149,7 @@ void bind_options(py::module_& m) {
       .def_readwrite("step_tol", &SolverOptions::step_tol)
       .def_readwrite("step_tol_grad", &SolverOptions::step_tol_grad)
       .def_readwrite("step_tol_cold_scale", &SolverOptions::step_tol_cold_scale)
+      .def_readwrite("step_tol_contraction", &SolverOptions::step_tol_contraction)
       .def_readwrite("max_backtracks", &SolverOptions::max_backtracks)
       .def_property(
           "eigen_filter", [](const SolverOptions& o) { return choice_name(kEigenFilters, o.eigen_filter); },
@@ -304,6 +305,8 @@ void bind_emu_solver(py::module_& m) {
       .def_property_readonly("modes", &EmuSolver::modes)
       .def_property_readonly("bone_coordinates", &EmuSolver::bone_coordinates,
                              "how movable bones turn: 'joint coordinates', 'per bone: <why>', '' without bones")
+      .def_property_readonly("bone_forest_error", &EmuSolver::bone_forest_error,
+                             "why the movable bones form no tree of joints (a loop, a weld); '' for a tree")
       .def_property_readonly("num_unknowns", &EmuSolver::num_unknowns)
       .def_property_readonly(
           "tet_unknown",

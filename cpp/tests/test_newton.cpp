@@ -187,6 +187,44 @@ TEST(newton_driver_step_tolerance) {
   CHECK(rq.converged && rq.status == "converged" && rq.iterations == rs.iterations);
 }
 
+TEST(newton_driver_step_tolerance_sees_the_contraction) {
+  // Steps a tenth of Newton's: full steps that shrink by only 0.9 each, so a
+  // short one leaves about nine times its length.
+  struct Slow : ConvexProblem {
+    SearchDirection direction(int it, PhaseTimes& time) {
+      SearchDirection dir = ConvexProblem::direction(it, time);
+      d *= 0.1;
+      dir.slope *= 0.1;
+      return dir;
+    }
+  };
+  ConvexProblem strict = make_problem(6);
+  SolveResult rs;
+  newton_minimize(strict, SolverOptions(), 1e-14, Clock::now(), rs);
+  SolverOptions o;
+  o.step_tol = 0.05;
+  o.max_iterations = 2000;
+  Slow a;
+  static_cast<ConvexProblem&>(a) = make_problem(6);
+  SolveResult ra;
+  newton_minimize(a, o, 1e-14, Clock::now(), ra);   // the rate assumed: stops far from the answer
+  CHECK(ra.converged && ra.status.find("step_tol") != std::string::npos);
+  CHECK((a.x - strict.x).cwiseAbs().maxCoeff() > 0.1);
+  o.step_tol_contraction = 0.5;                     // the rate seen: no short step stops it
+  Slow b;
+  static_cast<ConvexProblem&>(b) = make_problem(6);
+  SolveResult rb;
+  newton_minimize(b, o, 1e-14, Clock::now(), rb);
+  CHECK(rb.converged && rb.status.find("step_tol") == std::string::npos);
+  CHECK((b.x - strict.x).cwiseAbs().maxCoeff() <= 0.05);
+  // Newton's own steps contract: the seen rate stops it early, within step_tol
+  ConvexProblem c = make_problem(6);
+  SolveResult rc;
+  newton_minimize(c, o, 1e-14, Clock::now(), rc);
+  CHECK(rc.converged && rc.status.find("step_tol") != std::string::npos && rc.iterations < rs.iterations);
+  CHECK((c.x - strict.x).cwiseAbs().maxCoeff() <= 0.05);
+}
+
 TEST(newton_driver_stalls_when_no_step_helps) {
   // An ascent "direction" that the problem claims is descent: no step lowers
   // the energy or the gradient, so the solve stops as stalled (never loops).

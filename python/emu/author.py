@@ -219,9 +219,16 @@ def read_parts(path) -> PartsFile:
 
 
 def read_surface(path) -> tuple:
-    """A triangle surface (V (n, 3), F (f, 3)) from any file meshio reads (quads split in two)."""
+    """A triangle surface (V (n, 3), F (f, 3)) from any file meshio reads (quads
+    split in two), or from an ASCII VTK PolyData file (.vtp, OpenSim's geometry)."""
     import meshio
 
+    if os.fspath(path).lower().endswith(".vtp"):
+        from .io.vtk import read_polydata
+        try:
+            return read_polydata(path)
+        except ValueError as e:
+            raise AuthoringError(str(e)) from None
     try:
         m = meshio.read(os.fspath(path))
     except (Exception, SystemExit) as e:  # meshio raises many types

@@ -17,7 +17,15 @@ Scenes (:func:`names`):
   which share no vertex;
 - ``realistic_biceps``: an anatomical ``biceps`` from the ``scapula`` to the
   ``forearm``, over the ``humerus`` (elbow hinge, shoulder ball joint);
-  7 tets belong to no part in the original files and keep ``part`` = -1.
+  7 tets belong to no part in the original files and keep ``part`` = -1;
+- ``arm26``: real bone surfaces, the OpenSim arm26 model's humerus and
+  forearm (ulna + radius) from ``opensim-org/opensim-models`` (CC BY 3.0, the
+  credit in ``CREDITS.txt`` beside the mesh), posed at 90 degrees of elbow
+  flexion, with a biceps and a triceps laid along arm26's muscle paths and
+  meshed on first use (:mod:`emu.arm26`; needs the mesher, ``pip install
+  emu[mesh]``; about 40 s): ``<cache>/arm26/mesh.vtu`` with what ``emu mesh``
+  writes beside it, and the posed surfaces with their parts file in
+  ``<cache>/arm26/surfaces/``.
 
 The converted scene ``<cache>/<name>/<name>.vtu`` has points (n, 3), one
 ``tetra`` block (m, 4, 0-based), cell data ``part`` (int32 part id, -1 for
@@ -32,6 +40,9 @@ Where the files come from, and where they go (environment variables):
   hashes are still checked. No pooch needed.
 - ``EMU_DATA_URL``: the base URL of the repository's files (default the raw
   GitHub URL at the pinned commit); ``http(s)://`` or ``file://``.
+- ``EMU_OPENSIM_DIR``, ``EMU_OPENSIM_URL``: the same for arm26's files (a
+  copy of the opensim-models files: the folder holding ``Geometry/`` and
+  ``Models/Arm26/``).
 - ``EMU_CACHE_DIR``: where downloads and converted scenes are kept (default
   pooch's OS cache folder for ``emu``, e.g. ``~/.cache/emu`` on Linux).
 
@@ -54,7 +65,8 @@ import numpy as np
 
 __all__ = ["names", "path", "fetch", "fetch_main", "cache_dir", "read_dmat", "convert",
            "DatasetError", "DownloadError", "HashMismatchError", "UnknownDatasetError",
-           "REPOSITORY", "COMMIT", "BASE_URL", "REGISTRY"]
+           "REPOSITORY", "COMMIT", "BASE_URL", "REGISTRY", "OPENSIM_REPOSITORY", "OPENSIM_COMMIT",
+           "OPENSIM_REGISTRY"]
 
 REPOSITORY = "itsvismay/fast_muscles"
 COMMIT = "116b1308ce9916dceae70561ed0caf568580c4f3"   # branch consistentContact
@@ -149,8 +161,38 @@ _SCENES = {
     },
 }
 
-_OFFLINE_HINT = ("To work offline, set EMU_DATA_DIR to a local copy of the repository's files "
-                 "(the folder holding Scripts/gavin_matlab/data/...), or EMU_DATA_URL to another base URL.")
+
+class _Source:
+    """A repository the scenes' files come from: pinned commit, SHA-256 per file,
+    and the environment variables for a local copy (dir_env) or another base URL
+    (url_env)."""
+
+    def __init__(self, key, repository, commit, registry, dir_env, url_env, holds, licence):
+        self.key, self.repository, self.commit, self.registry = key, repository, commit, registry
+        self.dir_env, self.url_env, self.holds, self.licence = dir_env, url_env, holds, licence
+        self.base_url = f"https://raw.githubusercontent.com/{repository}/{commit}/"
+
+    def offline_hint(self):
+        return (f"To work offline, set {self.dir_env} to a local copy of the {self.repository} repository's "
+                f"files ({self.holds}), or {self.url_env} to another base URL.")
+
+
+_FAST_MUSCLES = _Source("fast_muscles", REPOSITORY, COMMIT, REGISTRY, "EMU_DATA_DIR", "EMU_DATA_URL",
+                        "the folder holding Scripts/gavin_matlab/data/...", "MIT licence")
+
+# The OpenSim models' repository: arm26's bone surfaces and model file (emu.arm26).
+OPENSIM_REPOSITORY = "opensim-org/opensim-models"
+OPENSIM_COMMIT = "20a888b9655e73fb84963d6e03eee3752cf6074b"
+OPENSIM_REGISTRY = {
+    "Geometry/arm_r_humerus.vtp": "46496ac6e4c1f8e0c1973ace8f9d4c6e60af34c65e147b13bacca1dbf3d8fe32",
+    "Geometry/arm_r_ulna.vtp": "f277b9404b127c1a14f300275a98a95d5282f5394431c9e819426f33e455bffa",
+    "Geometry/arm_r_radius.vtp": "04bddb2abaa5ac4de266828137627ece9c72783cc534eb664285ddddbd5468b5",
+    "Models/Arm26/arm26.osim": "e2224d0044eb393b05d64926c3fa1682c451a9adc7f510e5517ef9958d3d41b9",
+}
+_OPENSIM = _Source("opensim-models", OPENSIM_REPOSITORY, OPENSIM_COMMIT, OPENSIM_REGISTRY, "EMU_OPENSIM_DIR",
+                   "EMU_OPENSIM_URL", "the folder holding Geometry/ and Models/Arm26/", "CC BY 3.0, credit in CREDITS.txt")
+# Scenes built from surfaces (emu.arm26): name -> (source, version of the build; a new version rebuilds)
+_BUILT = {"arm26": (_OPENSIM, 1)}
 
 
 class DatasetError(Exception):
@@ -326,7 +368,7 @@ def _write_converted(name, conv, out_dir, license_path):
 
 def names() -> list:
     """The scene names, sorted."""
-    return sorted(_SCENES)
+    return sorted(list(_SCENES) + list(_BUILT))
 
 
 def _spec(name):
@@ -367,8 +409,8 @@ def cache_dir() -> str:
     return str(pooch.os_cache("emu"))
 
 
-def _base_url():
-    url = os.environ.get("EMU_DATA_URL") or BASE_URL
+def _base_url(source=_FAST_MUSCLES):
+    url = os.environ.get(source.url_env) or source.base_url
     return url if url.endswith("/") else url + "/"
 
 
@@ -380,17 +422,17 @@ def _sha256(path):
     return h.hexdigest()
 
 
-def _check_local(root, rel):
+def _check_local(root, rel, source=_FAST_MUSCLES):
     p = os.path.join(root, *rel.split("/"))
     if not os.path.isfile(p):
-        raise DownloadError(f"EMU_DATA_DIR={root} has no {rel}; EMU_DATA_DIR must be a copy of the "
-                            f"{REPOSITORY} repository's files at commit {COMMIT} "
-                            "(the folder holding Scripts/gavin_matlab/data/...)")
+        raise DownloadError(f"{source.dir_env}={root} has no {rel}; {source.dir_env} must be a copy of the "
+                            f"{source.repository} repository's files at commit {source.commit} "
+                            f"({source.holds})")
     got = _sha256(p)
-    if got != REGISTRY[rel]:
-        raise HashMismatchError(f"{p}: SHA-256 {got} differs from the pinned {REGISTRY[rel]} "
-                                f"(the file at commit {COMMIT} of {REPOSITORY}); the copy is corrupt or "
-                                "from another version")
+    if got != source.registry[rel]:
+        raise HashMismatchError(f"{p}: SHA-256 {got} differs from the pinned {source.registry[rel]} "
+                                f"(the file at commit {source.commit} of {source.repository}); the copy is "
+                                "corrupt or from another version")
     return p
 
 
@@ -399,9 +441,10 @@ class _Downloader:
     ftp, sftp and doi), http(s) goes through pooch's HTTPDownloader with a few
     retries; any failure becomes a DownloadError that names the URL."""
 
-    def __init__(self, pooch, progress):
+    def __init__(self, pooch, progress, hint):
         self.pooch = pooch
         self.progress = progress
+        self.hint = hint
 
     def __call__(self, url, output_file, pooch_obj, check_only=False):
         if self.progress:
@@ -426,29 +469,30 @@ class _Downloader:
                         raise
                     time.sleep(1 + attempt)
         except Exception as e:
-            raise DownloadError(f"could not download {url} ({type(e).__name__}: {e}). {_OFFLINE_HINT}") from e
+            raise DownloadError(f"could not download {url} ({type(e).__name__}: {e}). {self.hint}") from e
 
 
-def _raw_files(name, progress):
+def _raw_files(name, progress, source=_FAST_MUSCLES, rels=None):
     """Local paths of scene ``name``'s repository files (a dict rel -> path),
     and the folder they are under, downloading what is missing."""
-    local = os.environ.get("EMU_DATA_DIR")
+    rels = _files(name) if rels is None else rels
+    local = os.environ.get(source.dir_env)
     if local:
         root = os.path.abspath(os.path.expanduser(local))
         if progress:
-            progress(f"reading {name} from EMU_DATA_DIR={root}")
-        return {rel: _check_local(root, rel) for rel in _files(name)}, root
+            progress(f"reading {name} from {source.dir_env}={root}")
+        return {rel: _check_local(root, rel, source) for rel in rels}, root
     pooch = _import_pooch("to download the research scenes")
-    base = _base_url()
-    root = os.path.join(cache_dir(), f"fast_muscles-{COMMIT[:12]}")
-    store = pooch.create(path=root, base_url=base, registry=dict(REGISTRY), retry_if_failed=0)
-    downloader = _Downloader(pooch, progress)
+    base = _base_url(source)
+    root = os.path.join(cache_dir(), f"{source.key}-{source.commit[:12]}")
+    store = pooch.create(path=root, base_url=base, registry=dict(source.registry), retry_if_failed=0)
+    downloader = _Downloader(pooch, progress, source.offline_hint())
     logger = pooch.get_logger()
     level = logger.level
     logger.setLevel("WARNING")      # our own progress messages instead of pooch's
     try:
         out = {}
-        for rel in _files(name):
+        for rel in rels:
             try:
                 out[rel] = store.fetch(rel, downloader=downloader)
             except DatasetError:
@@ -457,10 +501,40 @@ def _raw_files(name, progress):
                 if "hash" not in str(e).lower():
                     raise
                 raise HashMismatchError(f"{base}{rel}: {e} The pinned hash is that of the file at "
-                                        f"commit {COMMIT} of {REPOSITORY}.") from None
+                                        f"commit {source.commit} of {source.repository}.") from None
     finally:
         logger.setLevel(level)
     return out, root
+
+
+def _built(name, progress, force):
+    """Scene ``name`` built from surfaces (emu.arm26): its mesh.vtu, building it
+    into the cache on first use (or with force); dataset.json, written last,
+    marks a finished build of this source commit and build version."""
+    from . import arm26
+
+    source, version = _BUILT[name]
+    out_dir = os.path.join(cache_dir(), name)
+    vtu = os.path.join(out_dir, "mesh.vtu")
+    marker = os.path.join(out_dir, "dataset.json")
+    stamp = {"source": f"{source.repository} at commit {source.commit}", "build": version}
+    if not force and os.path.isfile(vtu) and os.path.isfile(marker):
+        try:
+            with open(marker) as fh:
+                if json.load(fh) == stamp:
+                    return vtu
+        except (OSError, ValueError):
+            pass
+    files, _ = _raw_files(name, progress, source, sorted(source.registry))
+    if os.path.exists(marker):
+        os.remove(marker)
+    try:
+        arm26.build(files, out_dir, progress=progress)
+    except ValueError as e:      # AuthoringError included
+        raise DatasetError(f"building {name}: {e}") from None
+    with open(marker, "w") as fh:
+        json.dump(stamp, fh)
+    return vtu
 
 
 def _converted(name):
@@ -480,7 +554,10 @@ def _converted(name):
 def path(name, *, progress=None, force=False) -> str:
     """Path of scene ``name``'s converted ``.vtu`` (a ``scene.json`` beside it),
     fetching and converting it on first use (or always with ``force=True``).
-    ``progress``: a callable taking one message string (e.g. ``print``)."""
+    ``progress``: a callable taking one message string (e.g. ``print``).
+    ``arm26`` is built from surfaces instead (:mod:`emu.arm26`): its ``mesh.vtu``."""
+    if name in _BUILT:
+        return _built(name, progress, force)
     _spec(name)
     vtu, out_dir = _converted(name)
     if vtu is not None and not force:
@@ -497,7 +574,8 @@ def fetch(name=None, *, progress=None, force=False) -> dict:
     all (None). Returns {name: path of the converted .vtu}."""
     todo = names() if name is None else [name] if isinstance(name, str) else list(name)
     for n in todo:
-        _spec(n)       # every name checked before anything is downloaded
+        if n not in _BUILT:
+            _spec(n)       # every name checked before anything is downloaded
     return {n: path(n, progress=progress, force=force) for n in todo}
 
 
@@ -511,8 +589,9 @@ def fetch_main(names=None, progress=print) -> int:
     except (DatasetError, ImportError) as e:
         print(f"emu data: {e}", file=sys.stderr)
         return 1
-    src = os.environ.get("EMU_DATA_DIR") or _base_url()
-    progress(f"source: {src} ({REPOSITORY} at {COMMIT[:12]}, MIT licence)")
+    for source in {_BUILT[n][0] if n in _BUILT else _FAST_MUSCLES: None for n in paths}:
+        src = os.environ.get(source.dir_env) or _base_url(source)
+        progress(f"source: {src} ({source.repository} at {source.commit[:12]}, {source.licence})")
     for n, p in paths.items():
         progress(f"{n}: {p}")
     return 0

@@ -12,6 +12,7 @@ import numpy as np
 
 from . import _core
 from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, CERTIFY_CONTRACTION, CERTIFY_STEPS,
+                       SETTLE_CG_FORCING,
                        DEFAULT_ACCURACY, DEFAULT_ALPHA, STEP_FRACTION, STEP_GRAD, AccuracyMode, AccuracyWarning)
 from .checks import inverted_tets
 from .contact import ContactTerm
@@ -277,6 +278,8 @@ class Solver:
             opts.step_tol = float(step_fraction) * self.accuracy * bbox_diagonal(scene.points)
             opts.step_tol_grad = STEP_GRAD
             opts.step_tol_cold_scale = True   # warm starts gate on the cold start's |g| too (STEP_GRAD)
+            if method == "fem":   # FEM's stop sees its steps contract (EMU's answers are checked by the estimate)
+                opts.step_tol_contraction = CERTIFY_CONTRACTION
             position_tol = None   # accuracy mode's own step test applies
         elif method == "emu" and step == "newton-krylov" and position_tol > 0:
             # (Newton-Krylov only: its steps contract by at least half, so a
@@ -304,7 +307,7 @@ class Solver:
                 # applies its steps are then Newton steps (with a looser one a soft mode
                 # gives short inexact steps that stop the solve short of the accuracy;
                 # docs/DESIGN.md, "Accuracy mode as shipped")
-                opts.lagged_cg_forcing = ACCURACY_CG_FORCING_MIN
+                opts.lagged_cg_forcing = SETTLE_CG_FORCING
             self.settings.update(lagged_factor=True, lagged_cg_iterations=int(lagged_cg_iterations))
         self.contact = None   # the ContactTerm of a scene with contact (scene.enable_contact)
         if scene.contact is not None:
@@ -379,8 +382,8 @@ class Solver:
         self.settings["fem_correction"] = self.fem_correction
         if self.scene.movable_bones:
             self.settings["bone_coordinates"] = self.bone_coordinates
-            why = self.bone_coordinates.removeprefix("per bone: ")
-            if self.accuracy is not None and ("loop of joints" in why or "welded" in why):
+            why = self._bone_names(self._core.bone_forest_error) if method == "emu" else ""
+            if self.accuracy is not None and why:
                 # FEM, and so the error estimate accuracy mode stands on, takes
                 # trees of bones only
                 raise ValueError(
@@ -685,7 +688,8 @@ class Solver:
                 opts.step_tol = self.settings["step_fraction"] * self.accuracy * bbox_diagonal(self.scene.points)
                 opts.step_tol_grad = STEP_GRAD
                 opts.step_tol_cold_scale = True
-                opts.lagged_cg_forcing = ACCURACY_CG_FORCING_MIN
+                opts.step_tol_contraction = CERTIFY_CONTRACTION
+                opts.lagged_cg_forcing = SETTLE_CG_FORCING
                 opts.max_iterations = 200
             try:   # the same energy as EMU's, contact included
                 self._estimator = self._named(_core.FemSolver, self.model, opts, self.contact)

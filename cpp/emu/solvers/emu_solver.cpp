@@ -65,27 +65,30 @@ EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const Emu
 }
 
 void EmuSolver::set_bone_coordinates() {
+  std::unique_ptr<BoneForest> forest;
+  try {
+    forest = std::make_unique<BoneForest>(layout_, bbox_diagonal(model_.rest));
+  } catch (const std::invalid_argument& e) {  // a loop or weld: the fit's joint rows hold it
+    bone_forest_error_ = e.what();
+    bone_coordinates_ = "per bone: " + bone_forest_error_;
+    return;
+  }
   if (!emu_.joint_coordinates) {
     bone_coordinates_ = "per bone: joint_coordinates is off";
     return;
   }
-  try {
-    BoneForest forest(layout_, bbox_diagonal(model_.rest));
-    // Only a hinge between two moving bones curves the set of joint-consistent
-    // rotations; a bone's own turns keep a ball joint, or a hinge on something
-    // that does not turn, exactly (a geodesic of SO(3)): such scenes keep them.
-    const bool chained_hinge = std::any_of(forest.bones.begin(), forest.bones.end(), [](const BoneForest::Node& B) {
-      return B.kind == BoneForest::Kind::Hinge && B.parent >= 0;
-    });
-    if (!chained_hinge) {
-      bone_coordinates_ = "per bone: no hinge joins two movable bones";
-      return;
-    }
-    joints_ = std::make_unique<JointCoordinates>(std::move(forest), layout_.num_soft);
-    bone_coordinates_ = "joint coordinates";
-  } catch (const std::invalid_argument& e) {  // a loop or weld: the fit's joint rows hold it
-    bone_coordinates_ = std::string("per bone: ") + e.what();
+  // Only a hinge between two moving bones curves the set of joint-consistent
+  // rotations; a bone's own turns keep a ball joint, or a hinge on something
+  // that does not turn, exactly (a geodesic of SO(3)): such scenes keep them.
+  const bool chained_hinge = std::any_of(forest->bones.begin(), forest->bones.end(), [](const BoneForest::Node& B) {
+    return B.kind == BoneForest::Kind::Hinge && B.parent >= 0;
+  });
+  if (!chained_hinge) {
+    bone_coordinates_ = "per bone: no hinge joins two movable bones";
+    return;
   }
+  joints_ = std::make_unique<JointCoordinates>(std::move(*forest), layout_.num_soft);
+  bone_coordinates_ = "joint coordinates";
 }
 
 void EmuSolver::build_preconditioner() {

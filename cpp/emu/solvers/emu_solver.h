@@ -86,6 +86,10 @@ class EmuSolver {
   /// bones), "per bone: <why>" (no such hinge, a loop or weld of joints, or
   /// EmuOptions::joint_coordinates off), "" without bones.
   const std::string& bone_coordinates() const { return bone_coordinates_; }
+  /// Why the movable bones form no tree of joints (a loop, or two bones
+  /// welded), as BoneForest says; "" for a tree or without bones. FEM, and so
+  /// EMU's error estimate, takes trees only.
+  const std::string& bone_forest_error() const { return bone_forest_error_; }
 
  private:
   struct Context {  // per-load data: activations, pinned share of F, joint targets, gravity terms
@@ -168,6 +172,7 @@ class EmuSolver {
   std::unique_ptr<BoneTurnFits> turn_fits_;  // movable bones with the coarse space, else empty
   std::unique_ptr<JointCoordinates> joints_;  // movable bones in a forest of joints, else per-bone rotations
   std::string bone_coordinates_;
+  std::string bone_forest_error_;
 };
 
 }  // namespace emu

@@ -11,7 +11,7 @@ from ..geometry import deformation_gradients
 from ..lowering import tet_fibers
 from .mesh import write
 
-__all__ = ["write_solution", "write_pvd", "tet_activation"]
+__all__ = ["write_solution", "write_pvd", "tet_activation", "read_polydata"]
 
 
 def tet_activation(scene, activation) -> np.ndarray:
@@ -74,3 +74,48 @@ def write_pvd(path, entries):
     lines += ["  </Collection>", "</VTKFile>", ""]
     with open(path, "w") as f:
         f.write("\n".join(lines))
+
+
+def read_polydata(path) -> tuple:
+    """A triangle surface (V (n, 3) float64, F (f, 3) int64) from a VTK XML
+    PolyData file (.vtp) with ASCII data arrays, as OpenSim's geometry files
+    are; polygons of more than three corners are split into fans. Raises
+    ValueError naming the file for binary or appended data (convert it with
+    ParaView: File > Save Data, data mode Ascii) or a malformed file."""
+    import xml.etree.ElementTree as ET
+
+    path = str(path)
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError) as e:
+        raise ValueError(f"{path}: not a readable VTK XML file ({e})") from None
+    piece = root.find("PolyData/Piece")
+    if root.get("type") != "PolyData" or piece is None:
+        raise ValueError(f"{path}: not a VTK PolyData file (VTKFile type={root.get('type')!r})")
+
+    def array(where, name=None):
+        for a in piece.findall(f"{where}/DataArray"):
+            if name is None or a.get("Name") == name:
+                if a.get("format", "ascii") != "ascii":
+                    raise ValueError(f"{path}: {where} data is {a.get('format')!r}, only ascii is read; "
+                                     "save it as ASCII (ParaView: File > Save Data, data mode Ascii)")
+                try:
+                    return np.array((a.text or "").split(), dtype=np.float64)
+                except ValueError:
+                    raise ValueError(f"{path}: {where} holds a value that is not a number") from None
+        raise ValueError(f"{path}: no {where} {name or ''} data array".replace("  ", " "))
+
+    points = array("Points")
+    if points.size % 3:
+        raise ValueError(f"{path}: {points.size} point coordinates, not a multiple of 3")
+    V = points.reshape(-1, 3)
+    conn = array("Polys", "connectivity").astype(np.int64)
+    offsets = array("Polys", "offsets").astype(np.int64)
+    starts = np.concatenate([[0], offsets[:-1]])
+    if len(offsets) == 0 or np.any(offsets - starts < 3) or offsets[-1] != len(conn):
+        raise ValueError(f"{path}: Polys offsets do not describe polygons of 3 or more corners")
+    if conn.size and (conn.min() < 0 or conn.max() >= len(V)):
+        raise ValueError(f"{path}: Polys connectivity refers to a point out of range [0, {len(V)})")
+    F = [np.stack([np.full(e - b - 2, conn[b]), conn[b + 1:e - 1], conn[b + 2:e]], axis=1)
+         for b, e in zip(starts, offsets)]
+    return V, np.concatenate(F)

@@ -86,6 +86,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
   }
   bool stopped = stop_requested();
   Eigen::MatrixX3d x_prev;  // for the step_tol test
+  double step_before = -1.0;  // the last step's largest vertex move (-1: none yet)
   for (int it = 1; !res.converged && !stopped && it <= o.max_iterations; ++it) {
     if (o.interrupted && o.interrupted()) {
       res.status = "interrupted";
@@ -142,12 +143,19 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     if (conv.test(E_prev, E, gn)) {
       res.converged = true;
       res.status = gn > tol ? "converged: the gradient is at its round-off level" : "converged";
-    } else if (o.step_tol > 0 && ls.step == 1.0 && gn <= o.step_tol_grad * std::max(conv.g0, cold_g0) &&
-               (p.positions() - x_prev).rowwise().norm().maxCoeff() <= o.step_tol) {
+    } else if (o.step_tol > 0) {
       // A full Newton step this short: the remaining distance is about as
-      // short (Newton-Krylov converges at least linearly at rate <= 1/2).
-      res.converged = true;
-      res.status = "converged: a full step moved no vertex by more than step_tol";
+      // short where Newton converges at least linearly at rate <= 1/2
+      // (assumed, or seen with step_tol_contraction: a step of the exact
+      // Hessian, at most that fraction of the one before).
+      const double step = (p.positions() - x_prev).rowwise().norm().maxCoeff();
+      const bool contracted = o.step_tol_contraction <= 0 || (d.filtered == 0 && step_before >= 0 &&
+                                                              step <= o.step_tol_contraction * step_before);
+      if (ls.step == 1.0 && gn <= o.step_tol_grad * std::max(conv.g0, cold_g0) && step <= o.step_tol && contracted) {
+        res.converged = true;
+        res.status = "converged: a full step moved no vertex by more than step_tol";
+      }
+      step_before = step;
     }
     stopped = stop_requested();
   }
