@@ -33,13 +33,14 @@ struct SolverOptions {
   // instead, |g_cold| the cold start's gradient under the same load
   // (newton_minimize): accuracy mode, whose error estimate checks each answer.
   bool step_tol_cold_scale = false;
-  // ... and (when > 0) only once that step is a step of the exact Hessian (not
-  // the PSD-filtered one) and at most step_tol_contraction of the step before
-  // it: the contraction that lets a short step bound the
+  // ... and (when > 0) only once it and the step before it are steps of the
+  // exact Hessian (not the PSD-filtered one), each at most step_tol_contraction
+  // of the step before it: the contraction that lets a short step bound the
   // distance left (rate r <= 1/2 leaves at most r / (1 - r) <= 1 step) is seen,
   // not assumed. Along a softly resisted turn Newton's steps stay about as long
-  // for many steps, and a short one leaves several times its length
-  // (docs/DESIGN.md, "The estimate's certificate"). FEM's accuracy mode.
+  // for many steps, and one contracting step among them happens by chance
+  // (docs/DESIGN.md, "A short step is evidence only when it is an accurate
+  // Newton step"). FEM's accuracy mode and the settle.
   double step_tol_contraction = 0.0;
   double armijo = 1e-4;        // sufficient-decrease constant
   int max_backtracks = 40;     // step halvings before the line search gives up

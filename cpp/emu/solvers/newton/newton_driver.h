@@ -86,7 +86,8 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
   }
   bool stopped = stop_requested();
   Eigen::MatrixX3d x_prev;  // for the step_tol test
-  double step_before = -1.0;  // the last step's largest vertex move (-1: none yet)
+  double step_before = -1.0;     // the last step's largest vertex move (-1: none yet)
+  bool contracted_before = false;  // the last step was exact and at most step_tol_contraction of its own before
   for (int it = 1; !res.converged && !stopped && it <= o.max_iterations; ++it) {
     if (o.interrupted && o.interrupted()) {
       res.status = "interrupted";
@@ -146,16 +147,17 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     } else if (o.step_tol > 0) {
       // A full Newton step this short: the remaining distance is about as
       // short where Newton converges at least linearly at rate <= 1/2
-      // (assumed, or seen with step_tol_contraction: a step of the exact
-      // Hessian, at most that fraction of the one before).
+      // (assumed, or seen with step_tol_contraction: two steps in a row of
+      // the exact Hessian, each at most that fraction of the one before).
       const double step = (p.positions() - x_prev).rowwise().norm().maxCoeff();
-      const bool contracted = o.step_tol_contraction <= 0 || (d.filtered == 0 && step_before >= 0 &&
-                                                              step <= o.step_tol_contraction * step_before);
-      if (ls.step == 1.0 && gn <= o.step_tol_grad * std::max(conv.g0, cold_g0) && step <= o.step_tol && contracted) {
+      const bool contracts = d.filtered == 0 && step_before >= 0 && step <= o.step_tol_contraction * step_before;
+      const bool seen = o.step_tol_contraction <= 0 || (contracts && contracted_before);
+      if (ls.step == 1.0 && gn <= o.step_tol_grad * std::max(conv.g0, cold_g0) && step <= o.step_tol && seen) {
         res.converged = true;
         res.status = "converged: a full step moved no vertex by more than step_tol";
       }
       step_before = step;
+      contracted_before = contracts;
     }
     stopped = stop_requested();
   }
