@@ -19,7 +19,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "python" / "emu"
 # layer -> modules (names relative to emu; "" is the package itself)
 LAYERS = {
     # numerics and data with no notion of a scene
-    "core": {"_core", "geometry", "checks", "activation", "poses", "meshes", "fibers", "runtime", "shapes"},
+    "core": {"_core", "blas_kernel", "geometry", "checks", "activation", "poses", "meshes", "fibers", "runtime", "shapes"},
     # the scene, its parts and joints, the lowering to the C++ model, built-in scenes
     "model": {"parts", "joints", "contact", "scene", "lowering", "scenes"},
     # solving a scene and measuring a solution

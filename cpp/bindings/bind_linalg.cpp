@@ -16,6 +16,7 @@ void bind_linalg(py::module_& m) {
     py::dict d;
     d["library"] = b.library;
     d["config"] = b.config;
+    d["kernel"] = b.kernel;
     d["blas_threads"] = b.blas_threads;
     d["omp_threads"] = b.omp_threads;
     return d;

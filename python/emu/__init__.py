@@ -10,7 +10,10 @@ This module is the facade: it re-exports the public names and is imported by
 nothing inside the package (every internal import is relative and goes to a
 lower layer; tests/test_imports.py enforces it).
 """
-from . import _core
+from .blas_kernel import choose as _choose_blas_kernel
+
+_choose_blas_kernel()   # before the C++ core loads OpenBLAS: its kernel is fixed then
+from . import _core  # noqa: E402
 from .checks import inverted_tets
 from .geometry import bbox_diagonal, error_history, time_to_error, vertex_error
 from .joints import Joint

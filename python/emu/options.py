@@ -148,7 +148,9 @@ _TABLE = [
     Option("negative_curvature", bool, True, "fem", ("fem",),
            "near a saddle (a shape about to buckle) add the most negative curvature direction to the step"),
     # machine
-    Option("threads", (int, type(None)), None, "machine", BOTH, "OpenMP and OpenBLAS threads (None: leave as is)"),
+    Option("threads", (int, type(None)), None, "machine", BOTH, "OpenMP and OpenBLAS threads, for every solver from then on (None: leave as is; "
+           "the default is automatic: every core, fewer where other processes keep cores busy; "
+           "emu.runtime)"),
 ]
 OPTIONS = {o.name: o for o in _TABLE}
 DEPRECATED = {"single_precision_s0"}

@@ -21,7 +21,7 @@ from .options import (CHOICES, METHODS, OPTIONS, POSITION_TOL, OptionGroup, chec
                       options_text, solver_signature)
 from .lowering import build_model, declared_joint_rows, declared_joint_world
 from .poses import parse_pose
-from .runtime import set_threads
+from .runtime import adapt_threads, set_threads
 from .scene import Scene
 
 __all__ = ["Solver", "Solution", "solve", "METHODS", "STEPS", "NeutralModeWarning", "AccuracyWarning",
@@ -535,8 +535,10 @@ class Solver:
         iterates = [] if record_iterates else None
         start = None if initial is None else self._initial_array(initial)
         self._observers = (on_iteration, iterates)
+        threads = adapt_threads()   # fewer where other processes hold cores (emu.runtime)
         t0 = time.perf_counter()
         sol = self._accuracy.solve(self, load, start, t0) if self._accuracy is not None else self._run(load, start, t0)
+        sol.settings = {**sol.settings, "threads": threads}
         sol.time_s = time.perf_counter() - t0   # the whole solve, estimates and corrections included
         sol.phase_times["other"] = max(0.0, sol.time_s - sum(v for k, v in sol.phase_times.items() if k != "other"))
         return sol

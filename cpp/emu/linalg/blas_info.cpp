@@ -27,6 +27,7 @@ BlasInfo blas_info() {
   if (void* h = blas_handle()) {
     using config_fn = char* (*)();
     if (auto f = reinterpret_cast<config_fn>(dlsym(h, "openblas_get_config"))) r.config = f();
+    if (auto f = reinterpret_cast<config_fn>(dlsym(h, "openblas_get_corename"))) r.kernel = f();
     dlclose(h);
   }
   if (r.config.empty()) r.config = "not OpenBLAS (reference or other BLAS)";

@@ -8,6 +8,7 @@ namespace emu {
 struct BlasInfo {
   std::string library;  // shared object that provides dgemm_
   std::string config;   // openblas_get_config() where available
+  std::string kernel;   // openblas_get_corename(): the kernel OpenBLAS runs ("" for another BLAS)
   int blas_threads;     // -1 when the BLAS does not say
   int omp_threads;
 };

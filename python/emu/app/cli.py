@@ -58,7 +58,9 @@ def _print_info(args):
     i = runtime_info()
     print(f"emu {i['version']}")
     print(f"BLAS: {i['config']}")
-    print(f"      {i['library']}, {i['blas_threads']} thread(s); OpenMP: {i['omp_threads']} thread(s)")
+    print(f"      kernel {i['kernel']}")
+    print(f"      {i['library']}, {i['blas_threads']} thread(s); OpenMP: {i['omp_threads']} thread(s); "
+          f"threads: {i['threads']}")
     if args.mesh:
         spec = None
         if args.mesh.endswith((".toml", ".json")):
@@ -392,7 +394,8 @@ def _part_options(p):
                    help="merge vertices at the same point (parts meshed apart; vertex ids change)")
 
 
-THREADS_HELP = "solver threads, at least 1 (default: OMP_NUM_THREADS, else all cores)"
+THREADS_HELP = ("solver threads, at least 1 (default: OMP_NUM_THREADS, else automatic: all cores, fewer "
+                "where other processes keep cores busy)")
 
 
 def _threads(text: str) -> int:
