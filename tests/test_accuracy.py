@@ -435,3 +435,18 @@ def test_lagged_fem_in_accuracy_mode_takes_newton_steps_where_it_stops():
     sol = emu.Solver(scene, "fem", accuracy=0.01, lagged_factor=True).solve(act)
     assert sol.converged
     assert emu.vertex_error(sol, ref) <= 0.01
+
+
+@pytest.mark.parametrize("step", ["lbfgs", "woodbury"])
+def test_every_step_kind_takes_the_accuracy_default(step):
+    """Without alpha or accuracy, L-BFGS and Woodbury steps solve to EMU's
+    default accuracy too (at a fixed alpha of 100 mu they stopped 1.3% from
+    FEM on this muscle, with no warning)."""
+    s = fusiform(2, warn=False)
+    ref = emu.Solver(s, "fem", rtol_grad=1e-9).solve({"belly": 5e4})
+    solver = emu.Solver(s, "emu", step=step)
+    assert solver.accuracy == 0.01
+    sol = solver.solve({"belly": 5e4})
+    assert sol.accuracy_reached and emu.vertex_error(sol, ref) <= 0.01
+    fixed = emu.Solver(s, "emu", step=step, alpha=100.0)       # an alpha given: no accuracy mode
+    assert fixed.accuracy is None and emu.vertex_error(fixed.solve({"belly": 5e4}), ref) > 0.01

@@ -790,3 +790,20 @@ def test_emu_refuses_a_loop_of_joints_in_accuracy_mode():
         with pytest.raises(ValueError, match=r"accuracy mode needs FEM's error estimate.*'b' and 'c' close a "
                                              r"loop of joints.*give alpha= without accuracy"):
             emu.Solver(s, "emu", **kw)
+
+
+def test_a_chained_bones_angle_is_about_its_own_joint():
+    """The humerus of the upper limb hangs on the shoulder's ball joint and
+    carries the elbow hinge: its angle is its whole turn (the deltoid raises
+    it about 12 degrees at half activation), not its turn about the elbow's
+    axis (0.2 degrees), which is the forearm's own joint."""
+    s = emu.anatomy.upper_limb(1)
+    assert emu.bones.own_joint(s, "humerus").kind == "ball"
+    assert emu.bones.own_joint(s, "forearm").kind == "hinge"
+    assert set(emu.bones.own_joint(s, "forearm").bones) == {"humerus", "forearm"}
+    f = emu.Solver(s, "fem", rtol_grad=1e-9).solve({"deltoid": 0.5}, normalized=True)
+    whole = emu.bone_motion(s, f.positions, "humerus").angle_deg
+    assert whole > 5.0 and emu.bone_angle(s, f.positions, "humerus") == pytest.approx(whole)
+    elbow = emu.bones.own_joint(s, "forearm")
+    assert emu.bone_angle(s, f.positions, "forearm") == pytest.approx(
+        emu.signed_angle(emu.bone_motion(s, f.positions, "forearm").R, elbow.axis))

@@ -274,6 +274,14 @@ def test_scene_file_and_cli_set_kinds_and_fibres(tmp_path, mesh, capsys):
     assert main(["info", str(path), "--kind", "part1=bone", "part2=bone", "--fibers", "part0=laplace"]) == 0
     out = capsys.readouterr().out
     assert "part part1: bone" in out and "attachments: part1" in out
+    # no muscle, nothing scripted, no gravity: nothing would move; an error naming the fixes
+    (tmp_path / "still.toml").write_text('[mesh]\npath = "three.vtu"\n[parts.part1]\nkind = "bone"\n'
+                                         '[parts.part2]\nkind = "bone"\n[parts.part0]\nkind = "tendon"\n')
+    with pytest.raises(ValueError, match="no muscle, no scripted bone and no gravity: nothing moves it.*kind = "
+                                         "\"muscle\".*script a bone.*gravity"):
+        load_scene_file(tmp_path / "still.toml")
+    assert main(["run", str(tmp_path / "still.toml"), "--out", str(tmp_path / "out")]) != 0
+    assert "nothing moves it" in capsys.readouterr().err and not (tmp_path / "out").exists()
 
 
 def _box(lo, hi, n):
@@ -431,6 +439,9 @@ def test_emu_info_names_a_loop_tendon_attachments_and_the_mesher_defects(tmp_pat
     (tmp_path / "report.json").write_text(json.dumps({"tets": len(tets) + 1, "defects": ["stale"]}))
     main(["info", str(scene_file)])
     assert "stale" not in capsys.readouterr().out   # a report of another mesh is not this one's
+    # emu run refuses the loop (EMU's accuracy mode needs FEM's estimate) and leaves no empty folder
+    assert main(["run", str(scene_file), "--out", str(tmp_path / "run")]) != 0
+    assert "close a loop of joints" in capsys.readouterr().err and not (tmp_path / "run").exists()
     # a muscle attached only through its tendons (emu mesh's tendon_length)
     from conftest import bone_muscle_bone
     s, m, _ = bone_muscle_bone(0.2, r=2)

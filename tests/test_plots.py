@@ -56,3 +56,23 @@ def test_frame_title_names_the_frame_and_the_first_two_bones():
     assert frame_title(3, 0.5, {"ulna": 12.3, "humerus": -4.0, "scapula": 1.0}) == \
         "frame 3, t = 0.50 s\nulna +12\u00b0, humerus -4\u00b0"
     assert frame_title(0, 0.0, {}) == "frame 0, t = 0.00 s"   # no bones: one line
+
+
+def test_a_preview_adds_a_view_where_the_motion_leaves_the_picture_plane(tmp_path):
+    """motion_views: one view where the frames move within it; a second,
+    looking along the first's right axis, where they move along the axis the
+    first looks along by more than 5% of the diagonal; contact_sheet draws
+    each view's row of frames (twice the height)."""
+    from emu.io.plots import motion_views
+    s = emu.scenes.fusiform(1, warn=False)
+    diag = emu.bbox_diagonal(s.points)
+    in_plane = s.points + np.array([0.2 * diag, 0.0, 0.0])
+    out_of_plane = s.points + np.array([0.0, 0.0, 0.06 * diag])
+    assert motion_views(s, [s.points, in_plane], (0, 1)) == [(0, 1)]
+    assert motion_views(s, [s.points, out_of_plane], (0, 1)) == [(0, 1), (2, 1)]
+    assert motion_views(s, [s.points + np.array([0.0, 0.0, 0.04 * diag])], (0, 1)) == [(0, 1)]
+    one, two = tmp_path / "one.png", tmp_path / "two.png"
+    contact_sheet(one, s, [s.points, out_of_plane], view=(0, 1))
+    contact_sheet(two, s, [s.points, out_of_plane], views=[(0, 1), (2, 1)])
+    h1, h2 = matplotlib.image.imread(one).shape[0], matplotlib.image.imread(two).shape[0]
+    assert h2 == 2 * h1

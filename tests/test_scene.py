@@ -190,3 +190,14 @@ def test_tet_vertices_are_the_sorted_unique_ids():
     tets = rng.integers(0, 50, (40, 4))
     np.testing.assert_array_equal(tet_vertices(tets, 60), np.unique(tets.ravel()))
     assert tet_vertices(tets[:0], 60).size == 0
+
+
+def test_reprs_are_one_line_without_arrays():
+    s = emu.scenes.fusiform(1, warn=False)
+    sol = emu.solve(s, {"belly": 1e4}, "fem")
+    r = repr(sol)
+    assert "\n" not in r and len(r) < 200 and "array" not in r
+    assert r.startswith("Solution(method='fem', status='converged'") and f"vertices={len(s.points)}" in r
+    p = repr(s.parts["belly"])
+    assert "\n" not in p and "array" not in p
+    assert p == f"Part('belly', muscle, {len(s.parts['belly'].tets)} tets, youngs=60000, poisson=0.49)"

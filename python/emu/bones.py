@@ -64,11 +64,33 @@ def signed_angle(R: np.ndarray, axis) -> float:
     return float(np.degrees(ang) * (w / n) @ a)
 
 
+def own_joint(scene, bone: str):
+    """The joint that holds ``bone`` to the rest of the skeleton: the one
+    through which a walk of the joints from the fixed (and scripted) bones
+    first reaches it (the humerus' shoulder, not the elbow its forearm hangs
+    on); None for a bone no joint reaches."""
+    joints = [j for j in scene.joints() if j.kind in ("hinge", "ball")]
+    fixed = [n for n, p in scene.parts.items() if p.kind == "bone" and p.fixed]
+    reached, frontier = set(fixed), list(fixed)
+    while frontier:
+        nxt = []
+        for j in joints:
+            a, b = j.bones
+            for here, there in ((a, b), (b, a)):
+                if here in frontier and there not in reached:
+                    if there == bone:
+                        return j
+                    reached.add(there)
+                    nxt.append(there)
+        frontier = nxt
+    return None
+
+
 def bone_angle(scene, positions, bone: str) -> float:
-    """A bone's turn in degrees: signed about its hinge axis (see Scene.joints)
-    if it has a hinge, else the unsigned rotation angle."""
+    """A bone's turn in degrees: signed about its own joint's axis (own_joint)
+    where that joint is a hinge, else the unsigned rotation angle."""
     bm = bone_motion(scene, positions, bone)
-    for j in scene.joints():
-        if bone in j.bones and j.kind == "hinge":
-            return signed_angle(bm.R, j.axis)
+    j = own_joint(scene, bone)
+    if j is not None and j.kind == "hinge":
+        return signed_angle(bm.R, j.axis)
     return bm.angle_deg

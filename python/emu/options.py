@@ -83,8 +83,8 @@ _TABLE = [
            "with ``accuracy``: stop when a full step moves no vertex by more than this fraction of it"),
     # accuracy
     Option("accuracy", (float, type(None)), None, "accuracy", BOTH,
-           "the vertex error to FEM wanted, relative to the bounding-box diagonal (0.01: 1%; EMU's default "
-           "unless ``alpha`` is given), instead of a tolerance: both methods stop when a full Newton step moves "
+           "the vertex error to FEM wanted, relative to the bounding-box diagonal (0.01: 1%; EMU's default, "
+           "every ``step``, unless ``alpha`` is given or ``error_estimate`` is off), instead of a tolerance: both methods stop when a full Newton step moves "
            "no vertex by more than ``step_fraction`` of it; EMU also picks alpha so that its error estimate is "
            "within 0.6 x accuracy, raising it (or correcting its answer, ``fem_correction``) where not, and "
            "carries the alpha over to the next solve"),

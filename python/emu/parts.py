@@ -43,6 +43,12 @@ class Part:
     fixed: bool = True                 # bones: fixed (or scripted) rather than moved by the muscles
     joint_stiffness: float = 0.0       # movable bones: passive rotational stiffness (N m / rad)
 
+    def __repr__(self) -> str:
+        """One line: the part's name, kind, size and material, not its tet ids."""
+        extra = "" if self.kind != "bone" else (", fixed" if self.fixed else ", movable")
+        return (f"Part({self.name!r}, {self.kind}, {len(self.tets)} tets, youngs={self.youngs:g}, "
+                f"poisson={self.poisson:g}{extra})")
+
     @property
     def mu(self) -> float:
         return lame(self.youngs, self.poisson)[0]

@@ -159,6 +159,12 @@ class Solution:
     contact: dict | None = None      # scenes with contact: active pairs and minimum gap at positions
     solve_time_s: float = 0.0        # the solver's iterations alone (time_s: the whole solve)
 
+    def __repr__(self) -> str:
+        """One line: what a result is, not its arrays (positions, history: the fields)."""
+        est = "" if self.error_estimate is None else f", error_estimate={self.error_estimate:.2g}"
+        return (f"Solution(method={self.method!r}, status={self.status!r}, iterations={self.iterations}, "
+                f"time_s={self.time_s:.3g}{est}, vertices={len(self.positions)})")
+
     @property
     def fem_check(self) -> np.ndarray | None:
         """The certificate's last FEM Newton correction beyond x1 (None: none taken)."""
@@ -238,8 +244,8 @@ class Solver:
         """The Solver's setup, every option given (defaults from emu.options.OPTIONS)."""
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-        if method == "emu" and alpha is None and accuracy is None and step == "newton-krylov" and error_estimate:
-            accuracy = DEFAULT_ACCURACY   # the default: an answer within 1% of FEM's, alpha chosen for it
+        if method == "emu" and alpha is None and accuracy is None and error_estimate:
+            accuracy = DEFAULT_ACCURACY   # the default, every step kind: an answer within 1% of FEM's
         alpha = DEFAULT_ALPHA if alpha is None else alpha
         for name, v in (("alpha", alpha), ("rtol_grad", rtol_grad), ("rtol_energy", rtol_energy)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):

@@ -20,7 +20,7 @@ import numpy as np
 from ..advice import method_hint
 from ..bones import bone_angle
 from ..io.obj import boundary_faces, part_groups, write_obj
-from ..io.plots import contact_sheet, default_view, frame_title
+from ..io.plots import contact_sheet, default_view, frame_title, motion_views
 from ..io.vtk import write_pvd, write_solution
 from ..runtime import info as runtime_info
 from ..solve import Solver
@@ -52,19 +52,23 @@ def _preview(path, spec: SceneSpec, kept: dict, log: dict) -> None:
     entries = [log["frames"][k] for k in frames]
     acts = [scene.normalised_activation(e["activation"]) for e in entries]
     titles = [frame_title(e["frame"], e["time"], e["bone_angles_deg"]) for e in entries]
-    contact_sheet(path, scene, [kept[k] for k in frames], titles=titles, activations=acts,
-                  view=spec.output.get("view") or default_view(scene))
+    positions = [kept[k] for k in frames]
+    view = spec.output.get("view") or default_view(scene)
+    # a second view where the motion leaves the first's plane, unless the file chose its view
+    views = [view] if spec.output.get("view") else motion_views(scene, positions, view)
+    contact_sheet(path, scene, positions, titles=titles, activations=acts, views=views)
 
 
 def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_frame=None) -> dict:
     """Solve every frame of a scene file, warm-starting each from the last.
     on_frame(k, solution) is called after each frame (e.g. to keep positions)."""
     out = out_dir or spec.output["dir"]
+    # the solver first: a scene it refuses leaves no folder (and an earlier run's files in place)
+    solver = Solver(spec.scene, **spec.solver)
     os.makedirs(out, exist_ok=True)
     cleared = clear_run(out)
     if cleared:
         progress(f"removed {cleared} file(s) an earlier run wrote in {out}")
-    solver = Solver(spec.scene, **spec.solver)
     faces = groups = None
     if spec.output.get("obj", True):
         faces, faces_tet = boundary_faces(spec.scene.tets, return_tets=True)

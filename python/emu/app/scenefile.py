@@ -408,6 +408,12 @@ def load_scene_file(path) -> SceneSpec:
             scene.add_joint(b[0], b[1], spec["centre"], spec.get("axis"))
         except ValueError as e:
             raise SceneFileError(f"joints.{name}: {e}") from None
+    if not scene.muscles and not bones and not np.any(scene.gravity):
+        # nothing drives it: every frame would be the rest shape
+        raise SceneFileError(
+            "the scene has no muscle, no scripted bone and no gravity: nothing moves it, every frame would be "
+            "its rest shape; make a part a muscle ([parts.<name>] kind = \"muscle\" for mesh.path / "
+            "mesh.dataset), script a bone ([bones.<name>] axis, centre, angle) or set gravity")
     output = {"dir": "emu_run", "vtu": True, "obj": True, "preview": True, "view": None, "usd": False}
     output.update(data.get("output", {}))
     if output["view"] is not None:

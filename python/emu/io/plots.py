@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry import bbox_diagonal
 from .obj import boundary_faces
 
-__all__ = ["contact_sheet", "mesh_picture", "angle_activation_plot", "default_view", "frame_title",
+__all__ = ["contact_sheet", "motion_views", "mesh_picture", "angle_activation_plot", "default_view", "frame_title",
            "muscle_colour"]
 
 PART_COLOURS = {"bone": (0.93, 0.90, 0.80), "tendon": (0.85, 0.85, 0.95), "muscle": (0.80, 0.35, 0.35)}
@@ -160,7 +161,27 @@ def mesh_picture(path, scene, *, view=None):
     plt.close(fig)
 
 
-def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0, 1), columns=None):
+def motion_views(scene, frames, view) -> list:
+    """The views a preview needs: ``view``, and a second looking along its
+    right axis where the frames move the mesh along the axis ``view`` looks
+    along by more than MOTION_OUT_OF_VIEW of the rest mesh's bounding-box
+    diagonal (the upper limb's deltoid raises the humerus out of the elbow's
+    plane: its 12 degrees move the elbow 9% of the diagonal that way)."""
+    rest = scene.points
+    motion = np.max([np.abs(np.asarray(f) - rest).max(axis=0) for f in frames], axis=0)
+    depth = ({0, 1, 2} - set(view)).pop()
+    if motion[depth] > MOTION_OUT_OF_VIEW * bbox_diagonal(rest):
+        return [tuple(view), (depth, view[1])]
+    return [tuple(view)]
+
+
+MOTION_OUT_OF_VIEW = 0.05
+
+
+_AXES = "xyz"
+
+
+def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0, 1), columns=None, views=None):
     """Draw solved frames side by side, looking along the axis not in ``view``.
 
     frames       list of (n, 3) positions
@@ -169,33 +190,40 @@ def contact_sheet(path, scene, frames, *, titles=None, activations=None, view=(0
     activations  one {muscle: normalised activation} per frame (muscle colour)
     view         the picture's (right, up) coordinate axes (default x, y; default_view(scene)
                  picks one that shows the motion); the viewer looks from right x up
+    views        several such views, each drawing every frame in rows of its own (e.g.
+                 motion_views: a second where the motion leaves the first's plane)
     """
     plt = _pyplot()
     faces, faces_tet = boundary_faces(scene.tets, return_tets=True)
+    views = [tuple(view)] if views is None else [tuple(v) for v in views]
     n = len(frames)
     cols = columns or (n if n <= 4 else (n + 1) // 2)
     cols = min(cols, n)
-    rows = (n + cols - 1) // cols
-    allp = np.concatenate([np.asarray(f)[:, list(view)] for f in frames])
-    lo, hi = allp.min(axis=0), allp.max(axis=0)
-    pad = 0.05 * (hi - lo).max()
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 3.2 * rows), squeeze=False)
-    muscles = scene.muscles
-    for i, ax in enumerate(axes.ravel()):
+    rows_per_view = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows_per_view * len(views), cols, figsize=(3.2 * cols, 3.2 * rows_per_view * len(views)),
+                             squeeze=False)
+    for ax in axes.ravel():
         ax.set_axis_off()
-        if i >= n:
-            continue
-        P = np.asarray(frames[i])
-        act_tet = np.zeros(len(scene.tets))
-        for name, v in (activations[i] if activations else {}).items():
-            if name in muscles:
-                act_tet[scene.parts[name].tets] = v
-        _paint(ax, P[faces], _face_colours(scene, faces_tet, act_tet), view)
-        ax.set_xlim(lo[0] - pad, hi[0] + pad)
-        ax.set_ylim(lo[1] - pad, hi[1] + pad)
-        ax.set_aspect("equal")
-        if titles:
-            ax.set_title(titles[i], fontsize=9)
+    muscles = scene.muscles
+    for v_index, v in enumerate(views):
+        allp = np.concatenate([np.asarray(f)[:, list(v)] for f in frames])
+        lo, hi = allp.min(axis=0), allp.max(axis=0)
+        pad = 0.05 * (hi - lo).max()
+        block = axes[v_index * rows_per_view:(v_index + 1) * rows_per_view].ravel()
+        for i in range(n):
+            ax = block[i]
+            P = np.asarray(frames[i])
+            act_tet = np.zeros(len(scene.tets))
+            for name, a in (activations[i] if activations else {}).items():
+                if name in muscles:
+                    act_tet[scene.parts[name].tets] = a
+            _paint(ax, P[faces], _face_colours(scene, faces_tet, act_tet), v)
+            ax.set_xlim(lo[0] - pad, hi[0] + pad)
+            ax.set_ylim(lo[1] - pad, hi[1] + pad)
+            ax.set_aspect("equal")
+            label = "" if len(views) == 1 else f"\n({_AXES[v[0]]} right, {_AXES[v[1]]} up)"
+            if titles or label:
+                ax.set_title((titles[i] if titles else "") + label, fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
