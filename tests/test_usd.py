@@ -15,39 +15,71 @@ pxr = pytest.importorskip("pxr", reason="USD output needs usd-core (pip install 
 from pxr import Usd, UsdGeom  # noqa: E402
 
 
+def _volumes(x, tets):
+    a, b, c, d = (x[tets[:, k]] for k in range(4))
+    return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) / 6.0
+
+
 def test_a_stage_holds_every_part_at_every_frame(tmp_path):
+    """Bones as rigid transforms over their rest surface, soft parts as meshes
+    with per-face activation, J and fibre primvars and as tet meshes, every
+    one time-sampled per frame; read back with Pixar's library."""
     scene = emu.scenes.arm(1)
     solver = emu.Solver(scene, "fem")
     acts = [{"flexor": a} for a in (0.0, 0.3, 0.6)]
     frames = [solver.solve(a, normalized=True).positions for a in acts]
-    path = emu.io.write_usd(tmp_path / "arm.usda", scene, frames, dt=0.25, activations=acts)
+    path = emu.io.write_usd(tmp_path / "arm.usda", scene, frames, dt=0.25, activations=acts, meters_per_unit=0.01)
     stage = Usd.Stage.Open(str(path))
     assert stage.GetTimeCodesPerSecond() == pytest.approx(4.0)
     assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0, 2)
     assert stage.GetDefaultPrim().GetPath() == "/emu"
-    meshes = {p.GetName(): UsdGeom.Mesh(p) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)}
-    assert list(meshes) == list(scene.parts)
+    assert UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.01)
     faces, faces_tet = boundary_faces(scene.tets, return_tets=True)
-    for name, mesh in meshes.items():
-        mine = faces[np.isin(faces_tet, scene.parts[name].tets)]
-        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get())
+    rest_volume = _volumes(scene.points, scene.tets)
+    for name, part in scene.parts.items():
+        mine = np.isin(faces_tet, part.tets)
+        if part.kind == "bone":
+            xform = UsdGeom.Xform(stage.GetPrimAtPath(f"/emu/{name}"))
+            mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/emu/{name}/surface"))
+            assert xform and mesh and mesh.GetPointsAttr().GetTimeSamples() == []      # a rigid body
+            rest = np.asarray(mesh.GetPointsAttr().Get(), dtype=np.float64)
+            index = np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+            for k, x in enumerate(frames):
+                M = np.asarray(xform.GetLocalTransformation(k))           # row vectors: x' = x M
+                moved = rest @ M[:3, :3] + M[3, :3]
+                np.testing.assert_allclose(moved[index], x[faces[mine]], atol=1e-6)
+            continue
+        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/emu/{name}"))
         index = np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
-        assert len(counts) == len(mine) and np.all(counts == 3)
-        assert mesh.GetPointsAttr().GetTimeSamples() == [0.0, 1.0, 2.0]
+        assert len(index) == mine.sum() and mesh.GetPointsAttr().GetTimeSamples() == [0.0, 1.0, 2.0]
+        pv = UsdGeom.PrimvarsAPI(mesh)
+        tm = UsdGeom.TetMesh(stage.GetPrimAtPath(f"/emu/tets/{name}"))
+        tet_index = np.asarray(tm.GetTetVertexIndicesAttr().Get())
+        assert tet_index.shape == (len(part.tets), 4)
         for k, x in enumerate(frames):
             pts = np.asarray(mesh.GetPointsAttr().Get(k), dtype=np.float64)
-            # the stage's triangles are the part's boundary triangles at frame k
-            np.testing.assert_allclose(pts[index], x[mine], atol=1e-6)
-    red = [np.asarray(meshes["flexor"].GetDisplayColorAttr().Get(k))[0] for k in range(3)]
+            np.testing.assert_allclose(pts[index], x[faces[mine]], atol=1e-6)
+            J = (_volumes(x, scene.tets) / rest_volume)[faces_tet[mine]]
+            np.testing.assert_allclose(np.asarray(pv.GetPrimvar("emu:J").Get(k)), J, rtol=1e-5)
+            a = acts[k].get(name, 0.0)
+            np.testing.assert_allclose(np.asarray(pv.GetPrimvar("emu:activation").Get(k)), a, atol=1e-7)
+            fib = np.asarray(pv.GetPrimvar("emu:fiber").Get(k))
+            assert fib.shape == (mine.sum(), 3)
+            np.testing.assert_allclose(np.linalg.norm(fib, axis=1), 1.0 if part.kind == "muscle" else 0.0,
+                                       atol=1e-6)
+            tpts = np.asarray(tm.GetPointsAttr().Get(k), dtype=np.float64)
+            np.testing.assert_allclose(tpts[tet_index], x[scene.tets[part.tets]], atol=1e-6)
+    flexor = UsdGeom.Mesh(stage.GetPrimAtPath("/emu/flexor"))
+    red = [np.asarray(flexor.GetDisplayColorAttr().Get(k))[0] for k in range(3)]
     assert red[0][1] > red[1][1] > red[2][1]       # greener when relaxed, deeper red when active
-    bone = np.asarray(meshes["humerus"].GetDisplayColorAttr().Get(2))[0]
-    np.testing.assert_allclose(bone, emu.io.plots.PART_COLOURS["bone"], atol=1e-6)
+    with pytest.raises(ValueError, match="meters_per_unit must be a positive number"):
+        emu.io.write_usd(tmp_path / "bad.usda", scene, frames, meters_per_unit=0)
 
 
 def test_emu_run_usd_streams_the_frames(tmp_path):
     from test_scenefile import GOOD, write
 
-    scene = write(tmp_path, GOOD)
+    scene = write(tmp_path, GOOD + "\n[output]\nmeters_per_unit = 0.001\n")
     out = tmp_path / "out"
     r = subprocess.run([sys.executable, "-m", "emu.cli", "run", str(scene), "--out", str(out), "--usd",
                         "--no-preview"], capture_output=True, text=True, timeout=300)
@@ -56,6 +88,8 @@ def test_emu_run_usd_streams_the_frames(tmp_path):
     belly = UsdGeom.Mesh(stage.GetPrimAtPath("/emu/belly"))
     assert belly.GetPointsAttr().GetTimeSamples() == [0.0, 1.0, 2.0]
     assert stage.GetTimeCodesPerSecond() == pytest.approx(2.0)     # dt = 0.5 s
+    assert UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.001)
+    assert UsdGeom.PrimvarsAPI(belly).GetPrimvar("emu:activation").GetTimeSamples() == [0.0, 1.0, 2.0]
 
 
 def test_without_usd_core_the_error_says_how_to_get_it(tmp_path, monkeypatch):

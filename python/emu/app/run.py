@@ -85,7 +85,8 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
     if spec.output.get("usd", False):
         from ..io.usd import UsdWriter
 
-        usd = UsdWriter(os.path.join(out, "run.usd"), spec.scene, spec.dt)
+        usd = UsdWriter(os.path.join(out, "run.usd"), spec.scene, spec.dt,
+                        meters_per_unit=spec.output.get("meters_per_unit", 1.0), fibers=solver.fibers)
     want_preview = spec.output.get("preview", True)
     picks = set(np.linspace(0, spec.frames - 1, min(PREVIEW_FRAMES, spec.frames)).round().astype(int).tolist())
     kept = {}

@@ -87,7 +87,10 @@
     vtu = true                   # a VTU per frame and a .pvd series (ParaView)
     obj = true                   # an OBJ surface per frame (Blender)
     preview = true               # preview.png: up to eight frames, shaded, per-part colours
-    usd = false                  # run.usd: one animated USD stage, a prim per part (needs emu[usd])
+    usd = false                  # run.usd: one animated USD stage (needs emu[usd]): bones as rigid
+                                 # transforms, soft parts as meshes with activation / J / fibre
+                                 # primvars and as tet meshes
+    meters_per_unit = 1.0        # what one scene unit is in metres (the USD stage's metersPerUnit)
     view = "yz"                  # the preview's right and up axes (default: looking along the first
                                  # hinge, else along the mesh's thinnest side)
 
@@ -137,7 +140,8 @@ _SCHEMA = {
     "activation": "table of tables",
     "bones": "table of tables",
     "joints": "table of tables",
-    "output": {"dir": str, "vtu": bool, "obj": bool, "preview": bool, "view": str, "usd": bool},
+    "output": {"dir": str, "vtu": bool, "obj": bool, "preview": bool, "view": str, "usd": bool,
+               "meters_per_unit": float},
 }
 _BONE_KEYS = {"fixed": bool, "acap_weight": float, "joint_stiffness": float, "axis": list, "centre": list,
               "angle": list, "interpolation": str}
@@ -414,8 +418,11 @@ def load_scene_file(path) -> SceneSpec:
             "the scene has no muscle, no scripted bone and no gravity: nothing moves it, every frame would be "
             "its rest shape; make a part a muscle ([parts.<name>] kind = \"muscle\" for mesh.path / "
             "mesh.dataset), script a bone ([bones.<name>] axis, centre, angle) or set gravity")
-    output = {"dir": "emu_run", "vtu": True, "obj": True, "preview": True, "view": None, "usd": False}
+    output = {"dir": "emu_run", "vtu": True, "obj": True, "preview": True, "view": None, "usd": False,
+              "meters_per_unit": 1.0}
     output.update(data.get("output", {}))
+    if not output["meters_per_unit"] > 0:
+        raise SceneFileError(f"output.meters_per_unit must be positive, got {output['meters_per_unit']!r}")
     if output["view"] is not None:
         v = output["view"]
         if len(v) != 2 or v[0] == v[1] or not set(v) <= set("xyz"):

@@ -11,7 +11,7 @@ from ..geometry import deformation_gradients
 from ..lowering import tet_fibers
 from .mesh import write
 
-__all__ = ["write_solution", "write_pvd", "tet_activation", "read_polydata"]
+__all__ = ["write_solution", "write_pvd", "tet_activation", "tet_fields", "read_polydata"]
 
 
 def tet_activation(scene, activation) -> np.ndarray:
@@ -33,6 +33,21 @@ def tet_activation(scene, activation) -> np.ndarray:
     return act
 
 
+def tet_fields(scene, x: np.ndarray, fibers=None, who: str = "tet_fields") -> tuple:
+    """Per tet at positions x (n, 3): the deformed unit fibre F u (m, 3), zero
+    where u is, and the volume ratio J (m,). fibers: (m, 3) rest fibres (a
+    Solver's ``fibers``), None: the scene's (emu.lowering.tet_fibers)."""
+    fib = tet_fibers(scene) if fibers is None else np.asarray(fibers, dtype=np.float64)
+    if fib.shape != (len(scene.tets), 3):
+        raise ValueError(f"{who}: fibers must have shape ({len(scene.tets)}, 3), got {fib.shape}")
+    F = deformation_gradients(scene.points, scene.tets, x)
+    fu = np.einsum("tij,tj->ti", F, fib)
+    n = np.linalg.norm(fu, axis=1, keepdims=True)
+    fu = np.divide(fu, n, out=np.zeros_like(fu), where=n > 0)
+    J = signed_volumes(x, scene.tets) / signed_volumes(scene.points, scene.tets)
+    return fu, J
+
+
 def write_solution(path, scene, solution, *, activation=None, fibers=None):
     """A solved frame as a mesh: deformed points; point data displacement; cell
     data part (index in scene.parts; a VTU names each part in its field data,
@@ -49,15 +64,7 @@ def write_solution(path, scene, solution, *, activation=None, fibers=None):
     if x.shape != scene.points.shape:
         raise ValueError(f"write_solution: positions must have shape {scene.points.shape}, got {x.shape}")
     part = scene.part_index.astype(np.int32)
-    fib = tet_fibers(scene) if fibers is None else np.asarray(fibers, dtype=np.float64)
-    if fib.shape != (len(scene.tets), 3):
-        raise ValueError(f"write_solution: fibers must have shape ({len(scene.tets)}, 3), got {fib.shape}")
-    # deformed fibre direction F u, from the positions (both methods)
-    F = deformation_gradients(scene.points, scene.tets, x)
-    fu = np.einsum("tij,tj->ti", F, fib)
-    n = np.linalg.norm(fu, axis=1, keepdims=True)
-    fu = np.divide(fu, n, out=np.zeros_like(fu), where=n > 0)
-    J = signed_volumes(x, scene.tets) / signed_volumes(scene.points, scene.tets)
+    fu, J = tet_fields(scene, x, fibers, "write_solution")
     cell_data = {"part": part, "fiber": fu}
     if activation is not None:
         cell_data["activation"] = tet_activation(scene, activation)
