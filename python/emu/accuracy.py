@@ -105,6 +105,12 @@ ALPHA_MIN = 10.0
 # second raise rare), ~ alpha^-1 when lowering; a raise is by a factor in
 # [RAISE_MIN, RAISE_MAX].
 P_RAISE, RAISE_MIN, RAISE_MAX = 0.75, 1.5, 30.0
+# After a settle (an estimate that did not certify itself) the next alpha is raised by at most
+# this: EMU's distance to FEM there is a softly resisted turn's, which alpha^-P_RAISE does not
+# describe, and the full raise drove upper_limb's alpha 132 -> 65,736 mu over four settled
+# frames, each later frame 50+ Newton steps (examples: upper_limb 4.92 -> 3.00 s, arm26
+# 8.41 -> 5.87 s at a cap of 2, the same largest errors; DESIGN, "The estimate's certificate").
+SETTLE_RAISE_MAX = 2.0
 
 
 class AccuracyMode:
@@ -201,8 +207,8 @@ class AccuracyMode:
         the answer settled by a FEM solve to FEM's own accuracy stop, from the
         certificate's last correction (fem_steps[-1]); its estimate FEM's last step where the
         steps halve, else the last two summed (a bound). The next solve's alpha is raised as
-        a re-solve's would be from the distance settled (EMU's answers near
-        the target make the settling short). False (the solution unchanged)
+        a re-solve's would be from the distance settled, by at most SETTLE_RAISE_MAX
+        (EMU's answers near the target make the settling short). False (the solution unchanged)
         where that solve fails."""
         settled = port._fem_settle(load, sol.fem_steps[-1])
         if settled is None:
@@ -221,8 +227,8 @@ class AccuracyMode:
                                    f"steps, {distance:.2g} from EMU's answer); the estimate is the length of its "
                                    "last steps")
         sol.inverted_tets = port._inverted(answer)
-        if distance > AIM * self.target:
-            port._set_alpha(min(self.alpha_max, port.alpha * self.raise_factor(distance)))
+        if distance > AIM * self.target:   # at most SETTLE_RAISE_MAX: see its comment
+            port._set_alpha(min(self.alpha_max, port.alpha * min(SETTLE_RAISE_MAX, self.raise_factor(distance))))
         if not self.warned_settle:
             self.warned_settle = True
             warnings.warn(AccuracyWarning(
