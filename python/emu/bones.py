@@ -6,8 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _core
-from .geometry import bbox_diagonal, tet_vertices
+from .geometry import bbox_diagonal, rigid_fit, tet_vertices
 
 __all__ = ["BoneMotion", "rigid_fit", "bone_motion", "signed_angle", "bone_angle"]
 
@@ -18,21 +17,6 @@ class BoneMotion:
     t: np.ndarray        # (3,) translation: x = R X + t
     angle_deg: float     # rotation angle (unsigned)
     rigidity: float      # largest vertex distance from the rigid fit / bone's bounding-box diagonal
-
-
-def rigid_fit(X: np.ndarray, Y: np.ndarray) -> tuple:
-    """(R, t) minimising sum |R X_i + t - Y_i|^2 over rotations (Kabsch).
-
-    X, Y  (n, 3) matching point sets, n >= 3 not collinear for a unique R
-    """
-    X, Y = np.asarray(X, float), np.asarray(Y, float)
-    if X.shape != Y.shape or X.ndim != 2 or X.shape[1] != 3:
-        raise ValueError(f"need two (n, 3) point arrays of equal shape, got {X.shape} and {Y.shape}")
-    if len(X) == 0:
-        raise ValueError("need at least one point to fit a rigid motion")
-    # the same Kabsch fit the FEM solver starts its rigid bones with (linalg/rotation.h)
-    R = np.asarray(_core.best_rotation(X, Y))
-    return R, Y.mean(axis=0) - R @ X.mean(axis=0)
 
 
 def bone_motion(scene, positions, bone: str) -> BoneMotion:

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["error_history", "time_to_error", "time_within", "bbox_diagonal", "vertex_error", "deformation_gradients",
+from . import _core
+
+__all__ = ["rigid_fit", "error_history", "time_to_error", "time_within", "bbox_diagonal", "vertex_error", "deformation_gradients",
            "boundary_faces", "tet_vertices"]
 
 
@@ -92,3 +94,18 @@ def boundary_faces(tets: np.ndarray, return_tets: bool = False):
     if return_tets:
         return faces[on], np.repeat(np.arange(len(tets)), 4)[on]
     return faces[on]
+
+
+def rigid_fit(X: np.ndarray, Y: np.ndarray) -> tuple:
+    """(R, t) minimising sum |R X_i + t - Y_i|^2 over rotations (Kabsch).
+
+    X, Y  (n, 3) matching point sets, n >= 3 not collinear for a unique R
+    """
+    X, Y = np.asarray(X, float), np.asarray(Y, float)
+    if X.shape != Y.shape or X.ndim != 2 or X.shape[1] != 3:
+        raise ValueError(f"need two (n, 3) point arrays of equal shape, got {X.shape} and {Y.shape}")
+    if len(X) == 0:
+        raise ValueError("need at least one point to fit a rigid motion")
+    # the same Kabsch fit the FEM solver starts its rigid bones with (linalg/rotation.h)
+    R = np.asarray(_core.best_rotation(X, Y))
+    return R, Y.mean(axis=0) - R @ X.mean(axis=0)
