@@ -14,8 +14,9 @@ repository at a pinned commit, checked by SHA-256 in :mod:`emu.datasets`):
   hinge;
 - a biceps and a triceps: not anatomy but spindles laid along arm26's own
   muscle paths (``BIClong``, ``TRIlong``: MUSCLES names the path points),
-  each end at its path point's closest point on the bone and sunk
-  END_DEPTH into it, the belly an ellipse in section (wide across the arm,
+  each end on the line from its path point to the nearest point inside
+  its bone, END_DEPTH past the bone's surface, the belly an ellipse in
+  section (wide across the arm,
   flat against it) bowed away from the bone (a parabola, largest at the
   middle), the biceps with a tendon at each end (TENDON_LENGTH).
 
