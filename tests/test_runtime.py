@@ -16,7 +16,7 @@ def auto(monkeypatch):
     samples = []
     monkeypatch.setattr(runtime, "_cpus", [0, 1])
     monkeypatch.setattr(runtime, "_default_threads", 2)
-    monkeypatch.setattr(runtime, "_sample", lambda cpus, read=None: samples.pop(0))
+    monkeypatch.setattr(runtime, "_sample", lambda cpus: samples.pop(0))
     samples.append(_Sample(0.0, 0.0, 0.0))
     runtime.set_threads(None)
     yield samples

@@ -84,12 +84,13 @@ DEFAULT_ACCURACY, DEFAULT_ALPHA = 0.01, 100.0
 STEP_GRAD = 1e-2
 # ... and CG is asked for no more than Eisenstat-Walker's forcing term there.
 ACCURACY_CG_FORCING_MIN = math.sqrt(STEP_GRAD)
-# The settle's FEM solve (an answer whose estimate did not certify itself) stops on a short
-# step only where that step is an accurate Newton step: PCG on the lagged factor to this
-# relative residual, the exact Hessian, and a contraction seen (step_tol_contraction). At
-# ACCURACY_CG_FORCING_MIN PCG leaves most of a softly resisted turn out of the step, and a
-# short step stopped a settle 2.2% from FEM (arm26, cold at the biceps' peak; DESIGN).
-SETTLE_CG_FORCING = 1e-3
+# FEM's accuracy-mode solves on a lagged factor (lagged_factor=True, and the settle of an
+# answer whose estimate did not certify itself) stop on a short step only where that step is
+# an accurate Newton step: PCG on the lagged factor to this relative residual, the exact
+# Hessian, and a contraction seen (step_tol_contraction). At ACCURACY_CG_FORCING_MIN PCG
+# leaves most of a softly resisted turn out of the step, and a short step stopped a settle
+# 2.2% from FEM (arm26, cold at the biceps' peak; DESIGN).
+FEM_ACCURACY_CG_FORCING = 1e-3
 # A re-solve at a larger alpha whose estimate is above RESOLVE_GAIN x the one
 # before shows the error is not alpha's: no more raises without FEM
 # corrections, and none carried over. The alpha carried to the next solve is

@@ -88,8 +88,8 @@ class _Sample:
         self.busy_s, self.own_s, self.wall_s = busy_s, own_s, wall_s
 
 
-def _sample(cpus, read=_cpu_lines):
-    rows = read(cpus)
+def _sample(cpus):
+    rows = _cpu_lines(cpus)
     if rows is None:
         return None
     t = os.times()

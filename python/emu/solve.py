@@ -12,7 +12,7 @@ import numpy as np
 
 from . import _core
 from .accuracy import (ACCURACY_CG_FORCING, ACCURACY_CG_FORCING_MIN, CERTIFY_CONTRACTION, CERTIFY_STEPS,
-                       SETTLE_CG_FORCING,
+                       FEM_ACCURACY_CG_FORCING,
                        DEFAULT_ACCURACY, DEFAULT_ALPHA, STEP_FRACTION, STEP_GRAD, AccuracyMode, AccuracyWarning)
 from .checks import inverted_tets
 from .contact import ContactTerm
@@ -309,11 +309,12 @@ class Solver:
                 raise ValueError(f"lagged_cg_iterations must be >= 1, got {lagged_cg_iterations}")
             opts.lagged_cg_iterations = int(lagged_cg_iterations)
             if self.accuracy is not None:
-                # PCG's forcing term at most sqrt(STEP_GRAD) = 0.1: where the step test
+                # PCG's forcing term at most FEM_ACCURACY_CG_FORCING: where the step test
                 # applies its steps are then Newton steps (with a looser one a soft mode
                 # gives short inexact steps that stop the solve short of the accuracy;
-                # docs/DESIGN.md, "Accuracy mode as shipped")
-                opts.lagged_cg_forcing = SETTLE_CG_FORCING
+                # docs/DESIGN.md, "Accuracy mode as shipped" and "A short step is evidence
+                # only when it is an accurate Newton step")
+                opts.lagged_cg_forcing = FEM_ACCURACY_CG_FORCING
             self.settings.update(lagged_factor=True, lagged_cg_iterations=int(lagged_cg_iterations))
         self.contact = None   # the ContactTerm of a scene with contact (scene.enable_contact)
         if scene.contact is not None:
@@ -697,7 +698,7 @@ class Solver:
                 opts.step_tol_grad = STEP_GRAD
                 opts.step_tol_cold_scale = True
                 opts.step_tol_contraction = CERTIFY_CONTRACTION
-                opts.lagged_cg_forcing = SETTLE_CG_FORCING
+                opts.lagged_cg_forcing = FEM_ACCURACY_CG_FORCING
                 opts.max_iterations = 200
             try:   # the same energy as EMU's, contact included
                 self._estimator = self._named(_core.FemSolver, self.model, opts, self.contact)

@@ -138,11 +138,11 @@ class UsdWriter:
         return mesh
 
     def _tetmesh(self, where, part):
-        Vt, UsdGeom, Gf = self._vt, self._usdgeom, self._gf
+        Vt, UsdGeom = self._vt, self._usdgeom
         t = self.scene.tets[part.tets]
         verts, local = np.unique(t, return_inverse=True)
         tm = UsdGeom.TetMesh.Define(self.stage, where)
-        tm.CreateTetVertexIndicesAttr(Vt.Vec4iArray([Gf.Vec4i(*map(int, row)) for row in local.reshape(-1, 4)]))
+        tm.CreateTetVertexIndicesAttr(Vt.Vec4iArray.FromNumpy(local.reshape(-1, 4).astype(np.int32)))
         tm.GetPrim().SetCustomDataByKey("emu:part", part.name)
         return tm, verts
 
