@@ -56,21 +56,19 @@ def run_example(path, extra: dict) -> dict:
     baselines = {"FEM": emu.Solver(spec.scene, "fem", accuracy=accuracy)}
     if spec.scene.contact is None:   # (the lagged factor does not take contact)
         baselines["lagged FEM"] = emu.Solver(spec.scene, "fem", accuracy=accuracy, lagged_factor=True)
-    prev_b = dict.fromkeys(baselines)
     base_s = dict.fromkeys(baselines, 0.0)
-    prev_e = prev_f = None
     rows, frames = [], {}
     picks = set(np.linspace(0, spec.frames - 1, min(PICTURE_FRAMES, spec.frames)).round().astype(int).tolist())
+    loads = spec.frame_loads()
+    runs = {name: emu.solve_frames(s, loads) for name, s in (("emu", emu_solver), ("strict", fem_solver),
+                                                             *baselines.items())}
     for k in range(spec.frames):
-        act, poses = spec.activation(k), spec.bone_poses(k) or None
-        se = emu_solver.solve(act, bone_poses=poses, initial=prev_e)
-        sf = fem_solver.solve(act, bone_poses=poses, initial=prev_f)
-        prev_e, prev_f = se, sf
-        base_frame = {}
-        for name, s in baselines.items():
-            prev_b[name] = s.solve(act, bone_poses=poses, initial=prev_b[name])
-            base_frame[name] = prev_b[name].time_s
-            base_s[name] += prev_b[name].time_s
+        act = spec.activation(k)
+        sols = {name: next(run) for name, run in runs.items()}
+        se, sf = sols["emu"], sols["strict"]
+        base_frame = {name: sols[name].time_s for name in baselines}
+        for name in baselines:
+            base_s[name] += base_frame[name]
         angles = {b: emu.bone_angle(spec.scene, se.positions, b) for b in spec.scene.movable_bones}
         rows.append({"frame": k, "time": k * spec.dt, "emu_s": se.time_s, "estimate_s": se.error_estimate_time_s,
                      "strict_s": sf.time_s, "base_s": base_frame, "error": emu.vertex_error(se, sf),
@@ -85,7 +83,7 @@ def run_example(path, extra: dict) -> dict:
     for x in rows:
         x["fem_s"] = x["base_s"][fastest]
     return {"path": path, "spec": spec, "rows": rows, "frames": frames, "mode": mode, "baseline": fastest,
-            "factorizations": getattr(emu_solver._estimator, "factorizations", 0)}
+            "factorizations": getattr(emu_solver._estimate.fem, "factorizations", 0)}
 
 
 def summary_row(r) -> str:

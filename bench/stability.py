@@ -242,10 +242,7 @@ def run_case(method, case: Case, max_iterations=300) -> Outcome:
             if case.refusal(method) is None:
                 raise
             return Outcome(None, [], time.perf_counter() - t0, refused=str(e))
-        solutions, prev = [], None
-        for k in range(case.frames):
-            prev = solver.solve(case.activation_at(k), initial=prev)
-            solutions.append(prev)
+        solutions = list(emu.solve_frames(solver, (case.activation_at(k) for k in range(case.frames))))
     return Outcome(scene, solutions, time.perf_counter() - t0)
 
 

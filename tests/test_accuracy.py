@@ -77,7 +77,7 @@ def test_an_estimate_that_does_not_certify_itself_is_settled_by_fem(monkeypatch)
     raises the next solve's alpha from the distance settled, and says so once.
     Without FEM corrections EMU re-solves at a raised alpha until its estimate
     certifies itself (never reports the uncertified one as reached)."""
-    from emu.accuracy import AIM, P_RAISE, RAISE_MAX, SETTLE_RAISE_MAX
+    from emu.solve.accuracy import AIM, P_RAISE, RAISE_MAX, SETTLE_RAISE_MAX
     from emu.scenes import arm
     s = arm(3)
     act = {"flexor": 0.0, "extensor": 8e4}
@@ -85,9 +85,9 @@ def test_an_estimate_that_does_not_certify_itself_is_settled_by_fem(monkeypatch)
     x1, x2 = first.fem_steps[:2]
     assert x1 is first.fem_correction and first.fem_check is first.fem_steps[-1]
     contraction = emu.vertex_error(x1, x2) / emu.vertex_error(first.emu_positions, x1)
-    assert 0.2 < contraction <= sys.modules["emu.accuracy"].CERTIFY_CONTRACTION and first.error_estimate_certified
+    assert 0.2 < contraction <= sys.modules["emu.solve.accuracy"].CERTIFY_CONTRACTION and first.error_estimate_certified
     assert first.error_estimate == pytest.approx(emu.vertex_error(first.emu_positions, first.fem_check))
-    monkeypatch.setattr(sys.modules["emu.solve"], "CERTIFY_CONTRACTION", 0.2)
+    monkeypatch.setattr(sys.modules["emu.solve.estimate"], "CERTIFY_CONTRACTION", 0.2)
     fem = emu.solve(s, act, "fem", rtol_grad=1e-9)
     solver = emu.Solver(s, "emu", alpha=234.0, accuracy=0.01)
     with pytest.warns(emu.AccuracyWarning, match="could not certify itself"):
@@ -122,7 +122,9 @@ def test_correct_on_synthetic_corrections():
     a second as long as the first (no third asked) -> (False, None); a later
     step that short -> corrected there."""
     import dataclasses
+    import time
     from emu.geometry import bbox_diagonal
+    from emu.solve.solver import SolvePort
     s = fusiform(1, warn=False)
     solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.01)
     sol = solver.solve({"belly": 1e4})
@@ -144,10 +146,11 @@ def test_correct_on_synthetic_corrections():
             return at(self.steps[d])
 
     def run(own, steps):
-        solver._estimator = Corrections(steps)
+        solver._estimate.fem = Corrections(steps)
         trial = dataclasses.replace(sol, positions=x, fem_correction=at(own), fem_steps=None,
                                     error_estimate=emu.vertex_error(x, at(own)), corrected=False)
-        return solver._accuracy.correct(solver, load, trial), trial, solver._estimator.calls
+        port = SolvePort(solver, load, time.perf_counter())
+        return solver._accuracy.correct(port, trial), trial, solver._estimate.fem.calls
 
     (ok, closer), trial, calls = run(0.008, {0.008: 0.0085, 0.0085: 0.0086})
     assert ok and closer is None and trial.corrected and calls == 2
@@ -254,7 +257,7 @@ def test_scene_file_and_cli_accuracy(tmp_path):
     assert all(f["converged"] for f in log["frames"]) and log["settings"]["accuracy"] == 0.01
     assert all(f["error_estimate"] <= 0.006 for f in log["frames"])
     bad = write(tmp_path, GOOD.replace("alpha = 100.0", 'alpha = 100.0\naccuracy = "1%"'), name="bad.toml")
-    with pytest.raises(emu.scenefile.SceneFileError, match="solver.accuracy"):
+    with pytest.raises(emu.SceneFileError, match="solver.accuracy"):
         load_scene_file(bad)
 
 
@@ -282,7 +285,7 @@ def _estimate_stand_in(solver, estimate):
         x1 = positions.copy()
         x1[0, 0] += estimate() * bbox_diagonal(positions)
         return x1, 0.0, ""
-    solver._fem_correction_of = fem_correction_of
+    solver._estimate.correction_of = fem_correction_of
 
 
 def test_alpha_is_not_raised_where_raising_does_not_lower_the_estimate():
@@ -307,7 +310,7 @@ def test_the_alpha_carried_to_the_next_solve_is_bounded():
     raised about 1000x and carried over; what the next solve starts at stays
     within ALPHA_MAX_RATIO x the alpha given (1e6 mu here) instead of
     growing from frame to frame (1e5, 1e8, ... before)."""
-    from emu.accuracy import ALPHA_MAX_RATIO
+    from emu.solve.accuracy import ALPHA_MAX_RATIO
     solver = emu.Solver(fusiform(1, warn=False), "emu", alpha=100.0, accuracy=0.01, fem_correction=False)
     calls = [0]
 
@@ -345,13 +348,13 @@ def test_a_re_solve_starts_from_fem_s_correction():
     s = fusiform(2, warn=False)
     fem = emu.solve(s, {"belly": 5e4}, "fem", rtol_grad=1e-9)
     solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005, fem_correction=False)
-    corrections, estimate = [], solver._fem_correction_of
+    corrections, estimate = [], solver._estimate.correction_of
 
     def recorded(load, positions):
         out = estimate(load, positions)
         corrections.append(out[0])
         return out
-    solver._fem_correction_of = recorded
+    solver._estimate.correction_of = recorded
     sol = solver.solve({"belly": 5e4}, record_iterates=True)
     assert sol.settings["alpha_attempts"] >= 2 and emu.vertex_error(sol, fem) <= 0.005
     restart = np.flatnonzero(sol.history["iteration"] == 0)[1]
@@ -393,7 +396,7 @@ def test_lagged_newton_corrections_factorise_nothing():
     fresh = emu._core.FemSolver(solver.model, emu._core.SolverOptions())
     with pytest.raises(RuntimeError, match="lagged Newton"):
         fresh.newton_correction(load, sol.positions, "lagged-newton", 1)   # no factor yet
-    est = solver._estimator
+    est = solver._estimate.fem
     n = est.factorizations
     x = sol.fem_correction
     y = np.asarray(est.newton_correction(load, x, "lagged-newton", 1))
@@ -408,7 +411,7 @@ def test_the_alpha_carried_down_stops_at_a_floor():
     halved per solve but not below ALPHA_MIN (realistic_biceps went to 0.1 mu
     in 10 frames, and each frame then took twice the iterations); an alpha
     given below it stays where it was."""
-    from emu.accuracy import ALPHA_MIN
+    from emu.solve.accuracy import ALPHA_MIN
     solver = emu.Solver(fusiform(1, warn=False), "emu", alpha=100.0, accuracy=0.01)
     _estimate_stand_in(solver, lambda: 1e-5)
     for frame in range(6):

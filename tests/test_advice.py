@@ -1,9 +1,9 @@
-"""The method hint: the faster method by the measured crossover (emu.advice),
+"""The method hint: the faster method by the measured crossover (emu.solve.advice),
 printed by `emu solve`, `emu run` and the demo (tests/test_cli.py)."""
 from __future__ import annotations
 
 import emu
-from emu import advice
+from emu.solve import advice
 
 
 def test_the_hint_names_the_faster_method_by_soft_tets(monkeypatch):

@@ -1,5 +1,5 @@
-"""The `emu` command line (emu.cli, code in emu.app.cli), run as a user runs
-it: a separate process through ``python -m emu.cli`` (the entry point
+"""The `emu` command line (emu.app.cli), run as a user runs
+it: a separate process through ``python -m emu`` (the entry point
 pyproject.toml names)."""
 import json
 import subprocess
@@ -17,7 +17,7 @@ from test_scenefile import GOOD, write
 
 
 def emu_cli(*args, timeout=300):
-    return subprocess.run([sys.executable, "-m", "emu.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "emu", *args], capture_output=True, text=True,
                           timeout=timeout)
 
 

@@ -1,6 +1,6 @@
 """Element kernels: Stable Neo-Hookean, the active fibre term and the 9x9 PSD
 projection. Derivatives are checked against central finite differences of the
-level below, energies against the formulas of EMU.md section 2 written out
+level below, energies against the formulas of docs/METHOD.md, 2. Materials, written out
 here in numpy. vec(F) is column-major: vec(F)[i + 3 j] = F[i, j]."""
 import numpy as np
 import pytest
@@ -15,7 +15,7 @@ def vec(F):
 
 
 def snh_reference(F, mu, lam):
-    """EMU.md section 2, with the rest value Psi(I) subtracted."""
+    """docs/METHOD.md, 2. Materials, with the rest value Psi(I) subtracted."""
     ic = np.sum(F * F)
     J = np.linalg.det(F)
     beta = 1.0 + 0.75 * mu / lam

@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E
 from hypothesis.extra import numpy as hnp  # noqa: E402
 
 import emu  # noqa: E402
-from emu.scenefile import SceneFileError, load_scene_file  # noqa: E402
+from emu import SceneFileError, load_scene_file  # noqa: E402
 
 # 60 examples per test in the suite; EMU_FUZZ_EXAMPLES=2000 for a deeper run
 FUZZ = settings(max_examples=int(os.environ.get("EMU_FUZZ_EXAMPLES", "60")), deadline=None, suppress_health_check=[HealthCheck.too_slow,

@@ -13,7 +13,7 @@ import pytest
 
 import emu
 from emu.app.scenefile import _SCHEMA
-from emu.options import OPTIONS, options_markdown
+from emu.solve.options import OPTIONS, options_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -66,7 +66,7 @@ def test_emu_solve_and_scene_files_check_the_same_way(tmp_path):
     scene = emu.scenes.fusiform(2, warn=False)
     with pytest.raises(ValueError, match="alpha is an option of EMU only"):
         emu.solve(scene, {"belly": 0.1}, "fem", normalized=True, alpha=100)
-    from emu.scenefile import SceneFileError, load_scene_file
+    from emu import SceneFileError, load_scene_file
     from test_scenefile import GOOD
 
     (tmp_path / "s.toml").write_text(GOOD.replace("alpha = 100.0", "alpha = 100.0\nlagged_factor = true"))
@@ -80,12 +80,12 @@ def test_emu_solve_and_scene_files_check_the_same_way(tmp_path):
 def test_choices_are_spelled_once_in_the_core():
     """The C++ options take and give the names Python, scene files and the CLI use."""
     from emu import _core
-    from emu.options import CHOICES
+    from emu.solve.options import CHOICES
 
     assert CHOICES["step"] == ("newton-krylov", "woodbury", "lbfgs")
     assert CHOICES["eigen_filter"] == ("clamp", "abs")
     assert set(CHOICES["preconditioner"]) == {"constant-schur", "schur", "woodbury"}
-    eo, so = _core.EmuOptions(), _core.SolverOptions()
+    eo, so = _core.EmuSolverOptions(), _core.SolverOptions()
     assert (eo.step, eo.preconditioner, so.eigen_filter) == ("newton-krylov", "constant-schur", "clamp")
     for name in CHOICES["preconditioner"]:
         eo.preconditioner = name
@@ -109,7 +109,7 @@ def test_a_choice_that_is_not_one_is_named(kw, message):
 
 
 def test_option_groups_are_the_tables_groups():
-    from emu.options import GROUP_CLASSES, GROUPS
+    from emu.solve.options import GROUP_CLASSES, GROUPS
 
     grouped = [f.name for cls in GROUP_CLASSES for f in dataclasses.fields(cls)]
     assert sorted(grouped) == sorted(n for n, o in OPTIONS.items() if o.group in {c.group for c in GROUP_CLASSES}
@@ -163,7 +163,7 @@ def test_an_emu_group_option_is_refused_for_fem():
     ("alpha=200", ("alpha", 200)),
 ])
 def test_parse_option_reads_the_tables_type(text, expected):
-    from emu.options import parse_option
+    from emu.solve.options import parse_option
 
     assert parse_option(text) == expected
 
@@ -173,14 +173,14 @@ def test_parse_option_reads_the_tables_type(text, expected):
     ("threads=two", "threads takes int or none, got 'two'"), ("lagged_factor=maybe", "true/false"),
 ])
 def test_parse_option_names_the_problem(text, message):
-    from emu.options import parse_option
+    from emu.solve.options import parse_option
 
     with pytest.raises(ValueError, match=message):
         parse_option(text)
 
 
 def test_the_cli_takes_any_option(tmp_path, capsys):
-    from emu.cli import main
+    from emu.app.cli import main
 
     scene_file = ROOT / "examples" / "fusiform_pulse.toml"
     assert main(["run", str(scene_file), "--out", str(tmp_path / "a"), "--no-preview", "-O", "max_iterations=1",

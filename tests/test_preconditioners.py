@@ -79,7 +79,7 @@ def test_accuracy_mode_floors_cg_forcing_where_its_step_test_applies(kind):
     the floor, the first step it can act on stops no later (from the same
     state, a looser tolerance), and both answers are within the accuracy of
     FEM's."""
-    from emu.accuracy import ACCURACY_CG_FORCING_MIN, STEP_GRAD
+    from emu.solve.accuracy import ACCURACY_CG_FORCING_MIN, STEP_GRAD
     assert ACCURACY_CG_FORCING_MIN == pytest.approx(STEP_GRAD ** 0.5)
     make, act, normalized = SMALL_KINDS[kind]
     scene = make()
@@ -114,7 +114,7 @@ def test_strict_solves_have_no_cg_forcing_floor_and_bad_floors_are_refused():
         with pytest.raises(ValueError, match=f"cg_forcing_min applies to EMU's newton-krylov step only; leave it "
                                              f"out for step='{step}'"):
             emu.Solver(scene, "emu", step=step, cg_forcing_min=0.1)
-    opts = emu._core.EmuOptions()
+    opts = emu._core.EmuSolverOptions()
     opts.alpha, opts.cg_forcing_min = 1e5, float("nan")   # the core refuses it too
     with pytest.raises(ValueError, match="cg_forcing_min must lie in"):
         emu._core.EmuSolver(emu.Solver(scene, "emu", alpha=100).model, emu._core.SolverOptions(), opts)

@@ -17,7 +17,7 @@ def test_the_python_tour_runs(tmp_path, monkeypatch):
 
 
 def test_the_scene_file_in_the_tour_loads(tmp_path):
-    from emu.scenefile import load_scene_file
+    from emu import load_scene_file
 
     block = re.search(r"```toml\n(\[mesh.upper_limb\].*?)```", README, re.S).group(1)
     (tmp_path / "tour.toml").write_text(block)

@@ -1,4 +1,4 @@
-"""Running a scene file over its frames (emu.run.run_scene, code in
+"""Running a scene file over its frames (emu.run_scene, code in
 emu.app.run): warm-started solves, a VTU per frame and the .pvd series, OBJ
 surfaces, log.json. The schema: test_scenefile.py; the `emu` command: test_cli.py."""
 import json
@@ -11,8 +11,8 @@ import pytest
 import emu
 from emu.fibers import attachment_fibers
 from emu.io import boundary_faces
-from emu.run import run_scene
-from emu.scenefile import load_scene_file
+from emu import run_scene
+from emu import load_scene_file
 
 from conftest import bone_muscle_bone
 
@@ -142,8 +142,8 @@ def test_run_scene_logs_and_sums_up_frames_settled_by_fem(tmp_path, monkeypatch)
     log = run_scene(spec, str(tmp_path / "plain"), progress=lambda line: None)
     assert all(f["error_estimate_certified"] for f in log["frames"][1:])
     assert accuracy_summary(log) == ""
-    monkeypatch.setattr(sys.modules["emu.solve"], "CERTIFY_CONTRACTION", 0.0)
-    monkeypatch.setattr(sys.modules["emu.solve"], "STEP_FRACTION", 0.0)
+    monkeypatch.setattr(sys.modules["emu.solve.estimate"], "CERTIFY_CONTRACTION", 0.0)
+    monkeypatch.setattr(sys.modules["emu.solve.estimate"], "STEP_FRACTION", 0.0)
     lines = []
     with pytest.warns(emu.AccuracyWarning, match="could not certify itself"):
         log = run_scene(load_scene_file(p), str(tmp_path / "settled"), progress=lines.append)

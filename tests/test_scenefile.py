@@ -1,4 +1,4 @@
-"""Scene files (emu.scenefile, code in emu.app.scenefile): the schema, the
+"""Scene files (emu.load_scene_file, code in emu.app.scenefile): the schema, the
 typed loader and its errors. Running a scene file: test_run.py; the `emu`
 command: test_cli.py."""
 import json
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import emu
-from emu.scenefile import SceneFileError, load_scene_file
+from emu import SceneFileError, load_scene_file
 
 from conftest import bone_muscle_bone, gap_scene, shared_path, shared_raw
 

@@ -32,7 +32,7 @@ def test_rest_state_without_load(method, options, activation, tendons):
 
 # ------------------------------------------- an independent FEM in numpy/scipy
 def snh_numpy(F, mu, lam, hessian=False):
-    """Stable Neo-Hookean per tet (EMU.md section 2, rest value subtracted):
+    """Stable Neo-Hookean per tet (docs/METHOD.md, 2. Materials, rest value subtracted):
     energy (m,), stress (m, 3, 3) and optionally the 9x9 Hessians in the
     column-major vec(F) layout (m, 9, 9)."""
     beta = 1.0 + 0.75 * mu / lam

@@ -1,6 +1,6 @@
 """The solvers store a scene's tets along a Z-order curve (the core's along_curve,
-cpp/emu/model/tet_order.h; docs/DESIGN.md "Tet order"): an internal order that no
-answer depends on. The model Python builds lists the tets in the scene's order."""
+cpp/emu/model/tet_order.h; docs/DESIGN.md, "Tet order and the fit's per-vertex
+sums"): an internal order that no answer depends on. The model Python builds lists the tets in the scene's order."""
 import copy
 
 import numpy as np

@@ -81,7 +81,7 @@ def test_emu_run_usd_streams_the_frames(tmp_path):
 
     scene = write(tmp_path, GOOD + "\n[output]\nmeters_per_unit = 0.001\n")
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "emu.cli", "run", str(scene), "--out", str(out), "--usd",
+    r = subprocess.run([sys.executable, "-m", "emu", "run", str(scene), "--out", str(out), "--usd",
                         "--no-preview"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and "run.usd (USD)" in r.stdout, r.stdout + r.stderr
     stage = Usd.Stage.Open(str(out / "run.usd"))

@@ -26,7 +26,7 @@ namespace emu {
 /// A solver and its kernels, reached through EmuSolverTesting.
 struct CgKernels {
   explicit CgKernels(const Model& m) {
-    EmuOptions eo;
+    EmuSolverOptions eo;
     eo.alpha = 100.0 * m.mu(0);
     eo.preconditioner = EmuPreconditioner::Woodbury;  // its modes; the constant Schur one is built beside it
     solver = std::make_unique<EmuSolver>(m, SolverOptions(), eo);

@@ -33,7 +33,7 @@ def with_step_tol(solver, method, step_tol, alpha):
     o.step_tol = step_tol
     if method == "fem":
         return _core.FemSolver(solver.model, o)
-    eo = _core.EmuOptions()
+    eo = _core.EmuSolverOptions()
     eo.alpha = alpha * solver.mu_ref
     return _core.EmuSolver(solver.model, o, eo)
 

@@ -60,10 +60,8 @@ def main(argv=None):
         refs[name] = (scene, act, normalized, emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized))
     if a.demo:
         spec = demo_spec(a.demo_resolution, a.demo_frames)
-        fem, previous, demo_refs = emu.Solver(spec.scene, "fem", rtol_grad=1e-9), None, []
-        for k in range(spec.frames):
-            previous = fem.solve(spec.activation(k), initial=previous)
-            demo_refs.append(np.asarray(previous.positions))
+        fem = emu.Solver(spec.scene, "fem", rtol_grad=1e-9)
+        demo_refs = [np.asarray(s.positions) for s in emu.solve_frames(fem, spec.frame_loads())]
     for variant in variants:
         print(f"\nvariant {variant or 'defaults'} (accuracy {a.accuracy:g}, {a.threads} thread(s))\n")
         print("| scene | Newton / CG | solve s + estimate s | alpha chosen (solves) | estimate | true error |")

@@ -26,10 +26,8 @@ def run_frames(spec, method: str, references=None, **options) -> dict:
     positions per frame) also the largest vertex error to them (max_error)."""
     solver = emu.Solver(spec.scene, method, **options)
     totals = dict(solve_s=0.0, estimate_s=0.0, newton=0, cg=0, corrected=0, **{p: 0.0 for p in PHASES})
-    previous, errors = None, []
-    for k in range(spec.frames):
-        sol = solver.solve(spec.activation(k), initial=previous)
-        previous = sol
+    errors = []
+    for k, sol in enumerate(emu.solve_frames(solver, spec.frame_loads())):
         if references is not None:
             errors.append(emu.vertex_error(sol.positions, references[k]))
         totals["solve_s"] += sol.solve_time_s
@@ -40,7 +38,7 @@ def run_frames(spec, method: str, references=None, **options) -> dict:
         for p in PHASES:
             totals[p] += sol.phase_times[p]
     # the error estimate's FEM factorisations (its corrections run PCG on the last one first)
-    totals["estimate_factorizations"] = getattr(solver._estimator, "factorizations", None)
+    totals["estimate_factorizations"] = getattr(solver._estimate.fem, "factorizations", None)
     if errors:
         totals["max_error"] = max(errors)
     return totals

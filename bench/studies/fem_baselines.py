@@ -54,10 +54,8 @@ def sequence(frames, resolution):
     print("|---|---|---|---|---|" + "---|" * len(PHASES))
     for label, method, kw in variants:
         solver = emu.Solver(spec.scene, method, **kw)
-        total, prev = collections.Counter(), None
-        for k in range(spec.frames):
-            sol = solver.solve(spec.activation(k), initial=prev)
-            prev = sol
+        total = collections.Counter()
+        for sol in emu.solve_frames(solver, spec.frame_loads()):
             for p in PHASES:
                 total[p] += sol.phase_times[p]
             total["solve"] += sol.solve_time_s

@@ -41,14 +41,12 @@ def main(argv=None):
     print("| frame | EMU's own error | one step reads | estimate reads | contractions | certified | answer | "
           "final error | EMU s | FEM s | FEM error |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    prev = {"emu": None, "fem": None, "strict": None}
     total = {"emu": 0.0, "fem": 0.0}
     frames = spec.frames if a.frames is None else min(a.frames, spec.frames)
+    loads = spec.frame_loads(range(frames))
+    runs = {name: emu.solve_frames(s, loads) for name, s in (("emu", ours), ("fem", fem), ("strict", strict))}
     for k in range(frames):
-        act, poses = spec.activation(k), spec.bone_poses(k) or None
-        sols = {name: s.solve(act, bone_poses=poses, initial=prev[name])
-                for name, s in (("emu", ours), ("fem", fem), ("strict", strict))}
-        prev = sols
+        sols = {name: next(run) for name, run in runs.items()}
         e, ref = sols["emu"], sols["strict"].positions
         total["emu"] += e.time_s
         total["fem"] += sols["fem"].time_s

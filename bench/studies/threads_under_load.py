@@ -30,11 +30,8 @@ def run(spec, method, frames, mode) -> tuple:
     """Seconds for the first frames and the thread counts the solves ran on."""
     emu.runtime.set_threads(None if mode == "auto" else mode)
     solver = emu.Solver(spec.scene, method, accuracy=0.01)
-    prev, used = None, []
     t0 = time.perf_counter()
-    for k in range(min(frames, spec.frames)):
-        prev = solver.solve(spec.activation(k), bone_poses=spec.bone_poses(k) or None, initial=prev)
-        used.append(prev.settings["threads"])
+    used = [s.settings["threads"] for s in emu.solve_frames(solver, spec.frame_loads(range(min(frames, spec.frames))))]
     return time.perf_counter() - t0, sorted(set(used))
 
 

@@ -170,29 +170,29 @@ void bind_options(py::module_& m) {
       },
       "{option: (its choices, the default first)} for the options that take one of a few names");
 
-  py::class_<EmuOptions>(m, "EmuOptions")
+  py::class_<EmuSolverOptions>(m, "EmuSolverOptions")
       .def(py::init<>())
-      .def_readwrite("alpha", &EmuOptions::alpha)
-      .def_readwrite("modes", &EmuOptions::modes)
+      .def_readwrite("alpha", &EmuSolverOptions::alpha)
+      .def_readwrite("modes", &EmuSolverOptions::modes)
       .def_property(
-          "step", [](const EmuOptions& o) { return choice_name(kEmuSteps, o.step); },
-          [](EmuOptions& o, const std::string& s) { o.step = parse_choice(kEmuSteps, "step", s); })
-      .def_readwrite("cg_max_iterations", &EmuOptions::cg_max_iterations)
-      .def_readwrite("cg_forcing_max", &EmuOptions::cg_forcing_max)
-      .def_readwrite("cg_forcing_exponent", &EmuOptions::cg_forcing_exponent)
-      .def_readwrite("cg_forcing_min", &EmuOptions::cg_forcing_min)
-      .def_readwrite("cg_model_decrease", &EmuOptions::cg_model_decrease)
-      .def_readwrite("preconditioner_refresh", &EmuOptions::preconditioner_refresh)
+          "step", [](const EmuSolverOptions& o) { return choice_name(kEmuSteps, o.step); },
+          [](EmuSolverOptions& o, const std::string& s) { o.step = parse_choice(kEmuSteps, "step", s); })
+      .def_readwrite("cg_max_iterations", &EmuSolverOptions::cg_max_iterations)
+      .def_readwrite("cg_forcing_max", &EmuSolverOptions::cg_forcing_max)
+      .def_readwrite("cg_forcing_exponent", &EmuSolverOptions::cg_forcing_exponent)
+      .def_readwrite("cg_forcing_min", &EmuSolverOptions::cg_forcing_min)
+      .def_readwrite("cg_model_decrease", &EmuSolverOptions::cg_model_decrease)
+      .def_readwrite("preconditioner_refresh", &EmuSolverOptions::preconditioner_refresh)
       .def_property(
-          "preconditioner", [](const EmuOptions& o) { return choice_name(kEmuPreconditioners, o.preconditioner); },
-          [](EmuOptions& o, const std::string& s) {
+          "preconditioner", [](const EmuSolverOptions& o) { return choice_name(kEmuPreconditioners, o.preconditioner); },
+          [](EmuSolverOptions& o, const std::string& s) {
             o.preconditioner = parse_choice(kEmuPreconditioners, "preconditioner", s);
           })
-      .def_readwrite("bone_coarse_space", &EmuOptions::bone_coarse_space)
-      .def_readwrite("joint_coordinates", &EmuOptions::joint_coordinates)
-      .def_readwrite("recycled_directions", &EmuOptions::recycled_directions)
-      .def_readwrite("single_precision_preconditioner", &EmuOptions::single_precision_preconditioner)
-      .def_readwrite("lbfgs_memory", &EmuOptions::lbfgs_memory);
+      .def_readwrite("bone_coarse_space", &EmuSolverOptions::bone_coarse_space)
+      .def_readwrite("joint_coordinates", &EmuSolverOptions::joint_coordinates)
+      .def_readwrite("recycled_directions", &EmuSolverOptions::recycled_directions)
+      .def_readwrite("single_precision_preconditioner", &EmuSolverOptions::single_precision_preconditioner)
+      .def_readwrite("lbfgs_memory", &EmuSolverOptions::lbfgs_memory);
 }
 
 void bind_results(py::module_& m) {
@@ -279,7 +279,7 @@ void bind_fem_solver(py::module_& m) {
 
 void bind_emu_solver(py::module_& m) {
   py::class_<EmuSolver>(m, "EmuSolver")
-      .def(py::init([](const Model& m, const SolverOptions& o, const EmuOptions& e, const py::object& contact) {
+      .def(py::init([](const Model& m, const SolverOptions& o, const EmuSolverOptions& e, const py::object& contact) {
              PositionTerm term = contact_term(contact);
              py::gil_scoped_release release;
              return std::make_unique<EmuSolver>(m, with_interrupt(o), e, std::move(term));

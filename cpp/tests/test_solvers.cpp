@@ -310,7 +310,7 @@ TEST(along_curve_carries_every_per_tet_array_and_the_scene_index) {
     CHECK(stored.scene_tet(i) == 2 * t + 1 && stored.scene_index(i) == 2 * t + 1);
   }
   // the solvers store it so, and give EMU's F back per scene tet
-  EmuOptions eo;
+  EmuSolverOptions eo;
   eo.alpha = 100.0 * m.mu(0);
   EmuSolver emu(given, SolverOptions(), eo);
   CHECK(emu.model().scene_tet == stored.scene_tet);
@@ -365,7 +365,7 @@ TEST(fem_gradient_matches_energy_and_solve_converges) {
 
 TEST(emu_gradient_matches_energy) {
   const Model m = bar(2, 3);
-  EmuOptions eo;
+  EmuSolverOptions eo;
   eo.alpha = 1e3 * m.mu(0);
   EmuSolver emu(m, SolverOptions{}, eo);
   const LoadCase l = load(3e4);
@@ -389,7 +389,7 @@ TEST(emu_gradient_matches_energy) {
 TEST(emu_with_all_modes_inverts_the_exact_hessian) {
   const Model m = bar(1, 2);
   UnknownLayout d(m);
-  EmuOptions eo;
+  EmuSolverOptions eo;
   eo.alpha = 50 * m.mu(0);
   eo.modes = 3 * d.num_free;  // every mode: the Woodbury inverse is exact
   eo.preconditioner = EmuPreconditioner::Woodbury;  // (the default, constant Schur, builds no modes)
@@ -411,7 +411,7 @@ TEST(emu_and_fem_agree_as_alpha_grows) {
   double prev = 1e9;
   const double diag = (m.rest.colwise().maxCoeff() - m.rest.colwise().minCoeff()).norm();
   for (double rel : {10.0, 100.0, 1000.0}) {
-    EmuOptions eo;
+    EmuSolverOptions eo;
     eo.alpha = rel * m.mu(0);
     EmuSolver emu(m, SolverOptions{}, eo);
     const SolveResult re = emu.solve(l);
@@ -424,7 +424,7 @@ TEST(emu_and_fem_agree_as_alpha_grows) {
 }
 
 // The constant Schur preconditioner in single precision (S0's factor and the
-// block inverses rounded to float; EmuOptions::single_precision_preconditioner,
+// block inverses rounded to float; EmuSolverOptions::single_precision_preconditioner,
 // the default): the preconditioner changes CG's path, not the answer, and CG
 // needs about as many iterations as in double.
 TEST(emu_single_precision_preconditioner_changes_cg_not_the_answer) {
@@ -433,7 +433,7 @@ TEST(emu_single_precision_preconditioner_changes_cg_not_the_answer) {
   const double diag = (m.rest.colwise().maxCoeff() - m.rest.colwise().minCoeff()).norm();
   SolveResult r[2];
   for (int single : {0, 1}) {
-    EmuOptions eo;
+    EmuSolverOptions eo;
     eo.alpha = 100 * m.mu(0);
     eo.single_precision_preconditioner = single == 1;
     EmuSolver emu(m, SolverOptions{}, eo);
@@ -556,7 +556,7 @@ TEST(acap_single_precision_operator_with_bones_stays_symmetric) {
 TEST(bone_turns_at_once_match_one_at_a_time) {
   int soft_rigid = -1;
   const Model m = bar_with_two_bones(soft_rigid);
-  EmuOptions eo;
+  EmuSolverOptions eo;
   eo.alpha = 50.0;
   EmuSolver emu(m, SolverOptions{}, eo);
   const UnknownLayout layout(m);

@@ -6,8 +6,9 @@
     scene.pin(ids)
     sol = emu.solve(scene, activation={"belly": 5e4}, method="emu")
 
-This module is the facade: it re-exports the public names and is imported by
-nothing inside the package (every internal import is relative and goes to a
+This module is the facade: it re-exports the public names (scene files:
+emu.load_scene_file, emu.run_scene; ``python -m emu`` is the ``emu`` command)
+and is imported by nothing inside the package (every internal import is relative and goes to a
 lower layer; tests/test_imports.py enforces it).
 """
 from .blas_kernel import choose as _choose_blas_kernel
@@ -21,14 +22,22 @@ from .parts import Part, lame
 from .poses import pose_about, rotation
 from .runtime import __version__, info
 from .scene import MeshWarning, Scene
-from .solve import AccuracyWarning, ActivationWarning, NeutralModeWarning, Solution, Solver, solve
-from .options import AccuracyOptions, EmuOptions, FemOptions, NewtonOptions, StoppingOptions
+from .solve.accuracy import AccuracyWarning
+from .solve.load import ActivationWarning
+from .solve.solution import Solution
+from .solve.solver import NeutralModeWarning, Solver, solve
+from .solve.options import AccuracyOptions, EmuOptions, FemOptions, NewtonOptions, StoppingOptions
 from .bones import bone_angle, bone_motion, rigid_fit, signed_angle
 from .contact import ContactWarning
+from .solve.frames import Frame, solve_frames
 from .app.sweep import sweep
-from . import activation, anatomy, bones, contact, datasets, fibers, geometry, io, joints, lowering, meshes, options, poses, run, scenefile, scenes
+from .app.run import run_scene
+from .app.scenefile import SceneFileError, load_scene_file
+from . import activation, anatomy, bones, contact, datasets, fibers, geometry, io, joints, lowering, meshes, poses, scenes
+from .solve import options
 
 __all__ = ["Scene", "Part", "Joint", "MeshWarning", "lame", "Solver", "Solution", "solve", "StoppingOptions",
            "AccuracyOptions", "NewtonOptions", "EmuOptions", "FemOptions", "rotation", "pose_about",
            "io", "meshes", "scenes", "datasets", "fibers", "info", "vertex_error", "error_history", "time_to_error", "bbox_diagonal", "inverted_tets", "bone_angle", "bone_motion", "rigid_fit",
-           "signed_angle", "NeutralModeWarning", "AccuracyWarning", "ActivationWarning", "ContactWarning", "contact", "sweep", "__version__"]
+           "signed_angle", "NeutralModeWarning", "AccuracyWarning", "ActivationWarning", "ContactWarning", "contact", "sweep",
+           "run_scene", "load_scene_file", "SceneFileError", "Frame", "solve_frames", "__version__"]

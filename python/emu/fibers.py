@@ -2,8 +2,8 @@
 
 Per muscle: solve the Laplace equation on the muscle's tets with value -1 on
 its origin vertices and +1 on its insertion vertices; the fibre of each tet is
-the normalised gradient of that field (EMU.md section 6). The attachments of a
-muscle are its vertices shared with bone tets.
+the normalised gradient of that field (docs/DESIGN.md, "Authoring", on
+fibres). The attachments of a muscle are its vertices shared with bone tets.
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 // The preconditioner behind EMU's steps: an approximation of H^-1 for the
 // Hessian H = A - alpha C^T K_c^-1 C, built from the blocks A_u (one 9x9 SPD
 // block per unknown, eigen-filtered) and the constant ACAP operator. EmuSolver
-// holds one, chosen by EmuOptions::preconditioner (the Woodbury and L-BFGS
+// holds one, chosen by EmuSolverOptions::preconditioner (the Woodbury and L-BFGS
 // steps always use Woodbury):
 //   Woodbury        H_k^-1 through K's lowest k modes (woodbury.h)
 //   Schur           H^-1 through the Schur complement, refactorised per update

@@ -39,7 +39,7 @@ namespace emu {
 
 class ConstantSchur final : public BlockPreconditioner {
  public:
-  /// single_precision (EmuOptions::single_precision_preconditioner): S0's
+  /// single_precision (EmuSolverOptions::single_precision_preconditioner): S0's
   /// solves with its factor rounded to float (S0's own factor, or, where
   /// S0 = c K on a scene without movable bones, a rounded copy of acap's), and
   /// the block inverses kept rounded (round_spd_block: definite, >= A^-1).

@@ -30,7 +30,7 @@ namespace {
 double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
 }  // namespace
 
-EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options,
+EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuSolverOptions& emu_options,
                      PositionTerm contact)
     : model_(along_curve(model)),
       layout_(model_),
@@ -554,7 +554,7 @@ class EmuSolver::Newton {
   // (L-BFGS's curvature pairs make up for it); the Woodbury step rebuilds it
   // every step, as the paper does. False: dir has failed.
   bool refresh_blocks(int it, bool exact, SearchDirection& dir, PhaseTimes& time, bool& refreshed) {
-    const EmuOptions& o = s_.emu_;
+    const EmuSolverOptions& o = s_.emu_;
     const bool lbfgs = o.step == EmuStep::Lbfgs;
     refreshed = (!exact && !lbfgs) || it == 1 || since_refresh_ >= o.preconditioner_refresh ||
                 (cg_after_refresh_ >= 0 && last_cg_ > 1.5 * cg_after_refresh_ + 5);
@@ -666,7 +666,7 @@ class EmuSolver::Newton {
   // False: dir has failed.
   template <class Product>
   bool step_direction(const Product& product, SearchDirection& dir) {
-    const EmuOptions& o = s_.emu_;
+    const EmuSolverOptions& o = s_.emu_;
     const auto precond = [&](const Mat9X& r, Mat9X& z) { precondition(r, z); };
     if (o.step == EmuStep::Woodbury) {
       precondition(gR_, d_);
@@ -731,7 +731,7 @@ class EmuSolver::Newton {
   // A CG solve far longer than the last one met a mode the preconditioner
   // misses; its direction (orthogonalised against those kept) joins the bone
   // coarse space of the following steps, the oldest dropped beyond
-  // EmuOptions::recycled_directions (docs/DESIGN.md, "The cost of an iteration").
+  // EmuSolverOptions::recycled_directions (docs/DESIGN.md, "The cost of an iteration").
   void recycle(const Mat9X& d) {
     Mat9X dn = d;
     for (const Mat9X& r : recycled_) dn -= (dot(r, dn) / dot(r, r)) * r;

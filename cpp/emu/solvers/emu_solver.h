@@ -43,7 +43,7 @@ namespace emu {
 class EmuSolver {
  public:
   /// contact  barriers on the fitted positions x*(F) (an inactive term: none)
-  EmuSolver(const Model& model, const SolverOptions& options, const EmuOptions& emu_options,
+  EmuSolver(const Model& model, const SolverOptions& options, const EmuSolverOptions& emu_options,
             PositionTerm contact = {});
   // Its parts hold references to the model and layout it owns: not copied or moved.
   EmuSolver(const EmuSolver&) = delete;
@@ -84,7 +84,7 @@ class EmuSolver {
   const Eigen::VectorXi& tet_unknown() const { return layout_.tet_unknown; }
   /// How movable bones turn: "joint coordinates" (a hinge joins two movable
   /// bones), "per bone: <why>" (no such hinge, a loop or weld of joints, or
-  /// EmuOptions::joint_coordinates off), "" without bones.
+  /// EmuSolverOptions::joint_coordinates off), "" without bones.
   const std::string& bone_coordinates() const { return bone_coordinates_; }
   /// Why the movable bones form no tree of joints (a loop, or two bones
   /// welded), as BoneForest says; "" for a tree or without bones. FEM, and so
@@ -103,7 +103,7 @@ class EmuSolver {
   };
   class Newton;    // one solve's state, as the Newton driver sees it (emu_solver.cpp)
   friend struct EmuSolverTesting;  // the pieces one at a time, for tests and benchmarks (emu_solver_testing.h)
-  /// Setup: the preconditioner EmuOptions choose (with the ACAP modes for Woodbury's).
+  /// Setup: the preconditioner EmuSolverOptions choose (with the ACAP modes for Woodbury's).
   void build_preconditioner();
   /// The ks lowest scalar modes of the ACAP operator K (with movable bones, of K_c^-1 by its solves).
   Modes acap_modes(int ks) const;
@@ -155,11 +155,11 @@ class EmuSolver {
   Model model_;
   UnknownLayout layout_;
   SolverOptions options_;
-  EmuOptions emu_;
+  EmuSolverOptions emu_;
   PositionTerm contact_;
   std::unique_ptr<AcapOperator> acap_;
   std::unique_ptr<FitJacobian> jacobian_;  // the chain rule through acap_'s fit
-  std::unique_ptr<BlockPreconditioner> preconditioner_;  // EmuOptions::preconditioner's (block_preconditioner.h)
+  std::unique_ptr<BlockPreconditioner> preconditioner_;  // EmuSolverOptions::preconditioner's (block_preconditioner.h)
   int modes_ = 0;
   double factor_seconds_ = 0, modes_seconds_ = 0;
   // |g| at the exact rest equilibrium (F = I, no load) per unit alpha: the

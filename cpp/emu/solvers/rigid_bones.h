@@ -7,7 +7,7 @@
 // its joint with its parent bone (ball: 3 unknowns, hinge: 1, the axis
 // carried by the parent). Reduced joint coordinates, not constraint rows: the
 // joints hold exactly at every iterate, the unknowns stay few and the bone
-// Schur complement stays definite (docs/DESIGN.md, "Chains of bones").
+// Schur complement stays definite (docs/DESIGN.md, "Chains of bones in FEM").
 //
 // The Newton unknowns are exponential-map increments about the current state,
 // re-linearised every iteration: bone b's increment turns b and everything

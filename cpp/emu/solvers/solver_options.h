@@ -80,7 +80,7 @@ enum class EmuStep { Woodbury, NewtonKrylov, Lbfgs };
 // factorisation after setup but one per new alpha).
 enum class EmuPreconditioner { Woodbury, Schur, ConstantSchur };
 
-struct EmuOptions {
+struct EmuSolverOptions {
   double alpha = 0.0;      // absolute ACAP stiffness (Python passes alpha_rel * mu_ref)
   int modes = 24;          // k: ACAP modes in the Woodbury term (rounded up to a multiple of 3)
   EmuStep step = EmuStep::NewtonKrylov;

@@ -26,7 +26,7 @@ import warnings
 import numpy as np
 
 from .. import datasets
-from ..advice import method_hint
+from ..solve.advice import method_hint
 from ..geometry import vertex_error
 from ..io.mesh import load_scene
 from ..joints import joint_loop, loop_note
@@ -35,7 +35,7 @@ from ..runtime import __version__
 from ..runtime import info as runtime_info
 from ..runtime import set_threads
 from ..scenes import fusiform
-from ..options import CHOICES, OPTIONS, check_options, parse_option
+from ..solve.options import CHOICES, OPTIONS, check_options, parse_option
 from ..solve import Solver
 from .demo import run_demo
 from .run import accuracy_summary, run_scene

@@ -21,6 +21,7 @@ from ..geometry import vertex_error
 from ..io.plots import angle_activation_plot, contact_sheet
 from ..anatomy import arm
 from ..solve import Solver
+from ..solve.frames import solve_frames
 from .run import run_scene
 from .scenefile import SceneSpec
 
@@ -77,10 +78,8 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float | Non
     if compare_fem and done:
         progress("FEM reference for every frame (for EMU's error):")
         fem = Solver(scene, "fem")
-        prev, fem_angle, errors, fem_s = None, [], [], 0.0
-        for k in done:
-            sol = fem.solve(spec.activation(k), initial=prev)
-            prev = sol
+        fem_angle, errors, fem_s = [], [], 0.0
+        for k, sol in zip(done, solve_frames(fem, spec.frame_loads(done))):
             fem_s += sol.time_s
             fem_angle.append(bone_angle(scene, sol.positions, "forearm"))
             errors.append(vertex_error(kept[k], sol))

@@ -17,13 +17,14 @@ import time
 
 import numpy as np
 
-from ..advice import method_hint
+from ..solve.advice import method_hint
 from ..bones import bone_angle
 from ..io.obj import boundary_faces, part_groups, write_obj
 from ..io.plots import contact_sheet, default_view, frame_title, motion_views
 from ..io.vtk import write_pvd, write_solution
 from ..runtime import info as runtime_info
 from ..solve import Solver
+from ..solve.frames import solve_frames
 from .scenefile import SceneSpec
 
 __all__ = ["run_scene", "clear_run", "RUN_OUTPUTS"]
@@ -97,9 +98,8 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
         progress(hint)
     log["method_hint"] = hint
     try:
-        for k in range(spec.frames):
+        for k, sol in enumerate(solve_frames(solver, spec.frame_loads())):
             act = spec.activation(k)
-            sol = solver.solve(act, bone_poses=spec.bone_poses(k) or None, initial=prev)
             prev = sol
             name = f"frame_{k:04d}"
             if spec.output.get("vtu", True):

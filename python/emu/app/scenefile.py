@@ -105,7 +105,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..options import METHODS, check_options, scene_file_types
+from ..solve.frames import Frame
+from ..solve.options import METHODS, check_options, scene_file_types
 from ..activation import Curve
 from .. import datasets
 from ..io.mesh import load_scene
@@ -179,6 +180,14 @@ class SceneSpec:
             v = c.value(frame, t)
             out[name] = v * self.scene.parts[name].max_activation if c.normalized else v
         return out
+
+    def frame(self, k: int) -> Frame:
+        """Frame k's load: the activations and the scripted bones' poses."""
+        return Frame(activation=self.activation(k), bone_poses=self.bone_poses(k) or None)
+
+    def frame_loads(self, frames=None) -> list:
+        """The loads of ``frames`` (frame numbers; None: every frame), for emu.solve_frames."""
+        return [self.frame(k) for k in (range(self.frames) if frames is None else frames)]
 
 
 def _type_ok(value, kind) -> bool:

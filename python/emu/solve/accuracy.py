@@ -10,36 +10,21 @@ Newton steps do not contract) settle the answer by a FEM solve from it; then car
 an alpha over to the next solve. docs/DESIGN.md,
 "Accuracy as the knob" and "Accuracy mode as shipped", measure every rule here.
 
-The controller drives its solver through a small port (the Solver's methods):
-
-    port.alpha                       the current alpha (relative to mu_ref)
-    port._set_alpha(alpha)           alpha for the following solves
-    port._run(load, start, t0)       one EMU solve from start (None: rest; a
-                                     Solution: its F; (n, 3) positions: F of
-                                     those positions), with its error estimate;
-                                     t0 the perf_counter of the whole solve's
-                                     start (for iterate times)
-    port._correction(load, x)        one FEM Newton correction of positions x
-                                     (PCG on the estimator's factor only), or None
-    port._tight_cg()                 a context in which CG solves to the tight
-                                     forcing term ACCURACY_CG_FORCING
-    port._inverted(x)                the number of inverted tets at x
-    port._fem_settle(load, x)        a FEM solve from positions x to FEM's own
-                                     accuracy stop on the estimator: (core
-                                     result, its last two steps' lengths) or None
-    port.contact                     the scene's contact term (None: no contact)
+The controller drives one solve through a small typed port, AccuracyPort (the
+Solver makes one per solve): EMU runs, alpha, FEM corrections and settling.
 """
 from __future__ import annotations
 
 import math
+from typing import ContextManager, Protocol
 import time
 import warnings
 
 import numpy as np
 
-from .geometry import vertex_error
+from ..geometry import vertex_error
 
-__all__ = ["AccuracyMode", "AccuracyWarning"]
+__all__ = ["AccuracyMode", "AccuracyPort", "AccuracyWarning"]
 
 
 class AccuracyWarning(UserWarning):
@@ -114,6 +99,37 @@ P_RAISE, RAISE_MIN, RAISE_MAX = 0.75, 1.5, 30.0
 SETTLE_RAISE_MAX = 2.0
 
 
+class AccuracyPort(Protocol):
+    """What accuracy mode drives: one solve's EMU runs and FEM steps under one load
+    (the Solver makes one per solve)."""
+
+    alpha: float          # EMU's alpha (relative to the reference shear modulus) of the next run
+    has_contact: bool     # the scene has contact (no warm EMU re-solve from a FEM point)
+
+    def run(self, start):
+        """One EMU solve with its error estimate (a Solution), from start: None (rest), a
+        Solution, (m, 3, 3) deformation gradients, or (n, 3) positions."""
+
+    def set_alpha(self, alpha: float) -> None:
+        """The alpha of the following runs (this solve's and later solves')."""
+
+    def tight_cg(self) -> ContextManager:
+        """A context in which runs take CG to ACCURACY_CG_FORCING."""
+
+    def correction(self, x):
+        """One FEM Newton correction of positions x (PCG on the estimate's factor), or None."""
+
+    def settle(self, x):
+        """A FEM solve from positions x to FEM's accuracy stop: (core result, the last two
+        steps' lengths), or None where it fails."""
+
+    def inverted(self, x) -> int:
+        """How many tets are inverted at positions x."""
+
+    def elapsed(self) -> float:
+        """Seconds since the solve began (an iterate's time)."""
+
+
 class AccuracyMode:
     """The accuracy controller of one EMU Solver: its target, whether FEM
     corrections are on, and the bound on the alpha it carries between solves."""
@@ -132,11 +148,12 @@ class AccuracyMode:
         """The factor on alpha that brings an error to AIM x target (error ~ alpha^-P_RAISE)."""
         return min(RAISE_MAX, max(RAISE_MIN, (error / (AIM * self.target)) ** (1 / P_RAISE)))
 
-    def solve(self, port, load, start, t0: float):
+    def solve(self, port: AccuracyPort, start):
         """Solutions at increasing alphas until the estimate is within ACCEPT x
-        target (or corrected); returns the last with its totals over the solves."""
+        target (or corrected), from start (as AccuracyPort.run takes it); returns
+        the last with its totals over the solves."""
         target = self.target
-        sol = port._run(load, start, t0)
+        sol = port.run(start)
         runs = [sol]
         estimate_s = sol.error_estimate_time_s
         alpha_start = highest = port.alpha
@@ -146,7 +163,7 @@ class AccuracyMode:
             own = sol.error_estimate   # a correction replaces it with its last step's length
             stalled = before is not None and own > RESOLVE_GAIN * before
             t1 = time.perf_counter()
-            corrected, closer = self.correct(port, load, sol) if self.fem_correction else (False, None)
+            corrected, closer = self.correct(port, sol) if self.fem_correction else (False, None)
             estimate_s += time.perf_counter() - t1   # the corrections count as estimation time
             # where x1 overshot, the next alpha comes from EMU's distance to x3
             factor = self.raise_factor(own if closer is None else closer)
@@ -154,31 +171,31 @@ class AccuracyMode:
                 # the next solve (a sequence's next frame) starts at the alpha a
                 # re-solve would have used, so that EMU's own answers stay near
                 # the target and corrections the exception
-                port._set_alpha(alpha_start if stalled else port.alpha * factor)
+                port.set_alpha(alpha_start if stalled else port.alpha * factor)
                 if sol.iterates is not None:   # the corrected answer: after the estimates
-                    sol.iterates.append((time.perf_counter() - t0, sol.positions))
+                    sol.iterates.append((port.elapsed(), sol.positions))
                 break
             if (stalled and not self.fem_correction) or len(runs) >= MAX_ALPHA_ATTEMPTS:
                 if stalled:
-                    port._set_alpha(alpha_start)
+                    port.set_alpha(alpha_start)
                 break
             before, stalled = own, False
-            port._set_alpha(port.alpha * factor)
+            port.set_alpha(port.alpha * factor)
             highest = port.alpha
             x1 = sol.fem_correction
-            if x1 is not None and port.contact is None:
+            if x1 is not None and not port.has_contact:
                 # from FEM's correction: the positions are already near FEM's,
                 # EMU only settles at the new alpha (docs/DESIGN.md, "Accuracy mode as shipped")
-                sol = port._run(load, x1, t0)
+                sol = port.run(x1)
             else:
-                with port._tight_cg():
-                    sol = port._run(load, sol, t0)
+                with port.tight_cg():
+                    sol = port.run(sol)
             runs.append(sol)
             estimate_s += sol.error_estimate_time_s
         if sol.converged and sol.error_estimate_certified is False and self.fem_correction:
             t1 = time.perf_counter()
-            if self.settle(port, load, sol) and sol.iterates is not None:   # the settled answer, last
-                sol.iterates.append((time.perf_counter() - t0, sol.positions))
+            if self.settle(port, sol) and sol.iterates is not None:   # the settled answer, last
+                sol.iterates.append((port.elapsed(), sol.positions))
             estimate_s += time.perf_counter() - t1
         self._totals(sol, runs, estimate_s)
         if sol.error_estimate is not None:
@@ -186,9 +203,9 @@ class AccuracyMode:
         if (sol.error_estimate is not None and sol.error_estimate < AIM * target and not sol.corrected
                 and (sol.error_estimate_certified is not False or not self.fem_correction)):
             lower = max(port.alpha * 0.5, port.alpha * sol.error_estimate / (AIM * target))
-            port._set_alpha(max(lower, min(port.alpha, ALPHA_MIN)))
+            port.set_alpha(max(lower, min(port.alpha, ALPHA_MIN)))
         if port.alpha > self.alpha_max:   # what the next solve starts at stays bounded
-            port._set_alpha(self.alpha_max)
+            port.set_alpha(self.alpha_max)
         return sol
 
     @staticmethod
@@ -203,7 +220,7 @@ class AccuracyMode:
         sol.history = {k: np.concatenate([r.history[k] for r in runs]) for k in runs[0].history}
         sol.settings["alpha_attempts"] = len(runs)
 
-    def settle(self, port, load, sol) -> bool:
+    def settle(self, port: AccuracyPort, sol) -> bool:
         """EMU's estimate not certified (sol.error_estimate_certified False):
         the answer settled by a FEM solve to FEM's own accuracy stop, from the
         certificate's last correction (fem_steps[-1]); its estimate FEM's last step where the
@@ -211,7 +228,7 @@ class AccuracyMode:
         a re-solve's would be from the distance settled, by at most SETTLE_RAISE_MAX
         (EMU's answers near the target make the settling short). False (the solution unchanged)
         where that solve fails."""
-        settled = port._fem_settle(load, sol.fem_steps[-1])
+        settled = port.settle(sol.fem_steps[-1])
         if settled is None:
             return False
         r, steps = settled
@@ -227,9 +244,9 @@ class AccuracyMode:
                                    f"steps did not contract) settled by a FEM solve from it ({r.iterations} Newton "
                                    f"steps, {distance:.2g} from EMU's answer); the estimate is the length of its "
                                    "last steps")
-        sol.inverted_tets = port._inverted(answer)
+        sol.inverted_tets = port.inverted(answer)
         if distance > AIM * self.target:   # at most SETTLE_RAISE_MAX: see its comment
-            port._set_alpha(min(self.alpha_max, port.alpha * min(SETTLE_RAISE_MAX, self.raise_factor(distance))))
+            port.set_alpha(min(self.alpha_max, port.alpha * min(SETTLE_RAISE_MAX, self.raise_factor(distance))))
         if not self.warned_settle:
             self.warned_settle = True
             warnings.warn(AccuracyWarning(
@@ -262,7 +279,7 @@ class AccuracyMode:
         if sol.converged:   # a solve that stopped early says so in its status already
             warnings.warn(AccuracyWarning(sol.error_estimate_note), stacklevel=4)
 
-    def correct(self, port, load, sol) -> tuple:
+    def correct(self, port: AccuracyPort, sol) -> tuple:
         """EMU's estimate above ACCEPT x target: FEM Newton corrections from the
         estimate's x1 (x2 of x1, x3 of x2, ... at most MAX_CORRECTIONS), each
         certified or not as FEM's own solves are:
@@ -284,7 +301,7 @@ class AccuracyMode:
         own = vertex_error(x, x1)
         points = list(sol.fem_steps) if sol.fem_steps else [x1]   # the estimate's and certificate's own steps
         if len(points) == 1:
-            if (x2 := port._correction(load, x1)) is None:
+            if (x2 := port.correction(x1)) is None:
                 return False, None
             points.append(x2)
         steps = [vertex_error(a, b) for a, b in zip(points, points[1:])]
@@ -303,7 +320,7 @@ class AccuracyMode:
                 break
             if len(steps) >= MAX_CORRECTIONS:
                 return False, None
-            y = port._correction(load, points[-1])
+            y = port.correction(points[-1])
             if y is None:
                 return False, None
             points.append(y)
@@ -311,5 +328,5 @@ class AccuracyMode:
         sol.positions, sol.corrected, sol.error_estimate = answer, True, estimate
         sol.error_estimate_note = (f"EMU's answer (estimated {own:.2g} from FEM's) corrected by {len(steps)} FEM "
                                    "Newton steps; the estimate is the length of the last ones")
-        sol.inverted_tets = port._inverted(answer)
+        sol.inverted_tets = port.inverted(answer)
         return True, None
