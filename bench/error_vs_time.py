@@ -25,7 +25,7 @@ import numpy as np
 
 import emu
 from bench_scenes import SCENES
-from emu.geometry import time_within
+from emu.core.geometry import time_within
 
 TARGETS = (0.02, 0.01, 0.005)
 

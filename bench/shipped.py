@@ -129,6 +129,45 @@ def cell(r: dict, key: str) -> str:
     return f"{r[key]:.2f} ({max(r['errors']):.1e})"
 
 
+
+def one_row(a, name: str, ref: dict, reference, ref_path: str, threads: int, accuracy: float, tmp: str) -> tuple:
+    """(table cells, json row) of one scene at one thread count and accuracy: every method in
+    its own process, errors to the reference, the faster FEM over EMU, the hindsight bound."""
+    common = ["--scene", name, "--frames", a.frames]
+    res = {}
+    for m in METHODS:
+        path = os.path.join(tmp, f"{name}_{m}.npy")
+        r = run_child([*common, "--method", m, "--threads", threads, "--accuracy", accuracy,
+                       "--positions", path, *[f"--emu-option={o}" for o in a.emu_option]])
+        if "failed" not in r:
+            r["errors"] = errors_to(reference, np.load(path))
+            fs = r["frame_s"]
+            r["total_s"] = r["setup_s"] + sum(fs)
+            r["warm_frame_s"] = sum(fs[1:]) / (len(fs) - 1) if len(fs) > 1 else float("nan")
+        res[m] = r
+    key = "warm_frame_s" if a.frames else "total_s"
+    fem_best = min((res[m][key] for m in ("fem", "fem_lagged") if "failed" not in res[m]), default=float("inf"))
+    e = res["emu"]
+    ratio = fem_best / e[key] if "failed" not in e else float("nan")
+    emu_cell = cell(e, key)
+    if "failed" not in e:
+        parts = e["parts"]
+        emu_cell += f" ({sum(p['attempts'] for p in parts)}, {sum(p['estimate_s'] for p in parts):.2f})"
+    cells = [name, str(ref["tets"]), str(threads), f"{accuracy:g}", cell(res["fem"], key),
+             cell(res["fem_lagged"], key), emu_cell, f"{ratio:.2f}x"]
+    row = {"scene": name, "tets": ref["tets"], "threads": threads, "accuracy": accuracy,
+           "frames": a.frames, "runs": res, "faster_fem_over_emu": ratio}
+    if a.hindsight and not a.frames:
+        h = run_child([*common, "--method", "hindsight", "--threads", threads, "--accuracy",
+                       accuracy, "--reference", ref_path])
+        hs = h.get("hindsight_s", float("nan"))
+        row["hindsight_s"] = hs
+        cells += [f"{hs:.2f}", f"{e.get(key, float('nan')) / hs:.1f}x"]
+    rss = [f"{e.get('scene_rss_mb', float('nan')):.0f}"] + [
+        f"{res[m].get('peak_rss_mb', float('nan')):.0f}" for m in METHODS]
+    cells.append(", ".join(rss))
+    return cells, row
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--scenes", nargs="*", default=["fusiform_6k", "fusiform_20k", "arm_r3", "arm_r5",
@@ -176,40 +215,7 @@ def main(argv=None):
             reference = np.load(ref_path)
             for threads in a.threads:
                 for accuracy in a.accuracy:
-                    res = {}
-                    for m in METHODS:
-                        path = os.path.join(tmp, f"{name}_{m}.npy")
-                        r = run_child([*common, "--method", m, "--threads", threads, "--accuracy", accuracy,
-                                       "--positions", path, *[f"--emu-option={o}" for o in a.emu_option]])
-                        if "failed" not in r:
-                            r["errors"] = errors_to(reference, np.load(path))
-                            fs = r["frame_s"]
-                            r["total_s"] = r["setup_s"] + sum(fs)
-                            r["warm_frame_s"] = sum(fs[1:]) / (len(fs) - 1) if len(fs) > 1 else float("nan")
-                        res[m] = r
-                    key = "warm_frame_s" if a.frames else "total_s"
-                    fem_best = min((res[m][key] for m in ("fem", "fem_lagged") if "failed" not in res[m]),
-                                   default=float("inf"))
-                    e = res["emu"]
-                    ratio = fem_best / e[key] if "failed" not in e else float("nan")
-                    emu_cell = cell(e, key)
-                    if "failed" not in e:
-                        parts = e["parts"]
-                        emu_cell += (f" ({sum(p['attempts'] for p in parts)}, "
-                                     f"{sum(p['estimate_s'] for p in parts):.2f})")
-                    cells = [name, str(ref["tets"]), str(threads), f"{accuracy:g}", cell(res["fem"], key),
-                             cell(res["fem_lagged"], key), emu_cell, f"{ratio:.2f}x"]
-                    row = {"scene": name, "tets": ref["tets"], "threads": threads, "accuracy": accuracy,
-                           "frames": a.frames, "runs": res, "faster_fem_over_emu": ratio}
-                    if a.hindsight and not a.frames:
-                        h = run_child([*common, "--method", "hindsight", "--threads", threads, "--accuracy",
-                                       accuracy, "--reference", ref_path])
-                        hs = h.get("hindsight_s", float("nan"))
-                        row["hindsight_s"] = hs
-                        cells += [f"{hs:.2f}", f"{e.get(key, float('nan')) / hs:.1f}x"]
-                    rss = [f"{e.get('scene_rss_mb', float('nan')):.0f}"] + [
-                        f"{res[m].get('peak_rss_mb', float('nan')):.0f}" for m in METHODS]
-                    cells.append(", ".join(rss))
+                    cells, row = one_row(a, name, ref, reference, ref_path, threads, accuracy, tmp)
                     print("| " + " | ".join(cells) + " |", flush=True)
                     rows.append(row)
     with open(os.path.join(a.out, "shipped.json" if not a.frames else "shipped_sequences.json"), "w") as f:

@@ -23,9 +23,9 @@ import numpy as np
 
 import emu
 from bench_scenes import start_run
-from emu.checks import signed_volumes
-from emu.meshes import block_mesh
-from emu.meshes import fusiform as fusiform_mesh
+from emu.core.checks import signed_volumes
+from emu.build.procedural import block_mesh
+from emu.build.procedural import fusiform as fusiform_mesh
 
 MUSCLE_YOUNGS = 6e4
 FRAMES = 50
@@ -44,7 +44,7 @@ def pinned_muscle(*, tendon_ratio=7500.0, poisson=0.49, scale=1.0, resolution=2)
 def arm(*, forearm_fixed=False, bone_ratio=None, bone_acap_weight=None, joint_stiffness=0.0):
     """The arm at resolution 1; bone_ratio: the bones' Young's modulus over the
     muscles' (they are rigid: it must not matter); bone_acap_weight: EMU's."""
-    m = emu.meshes.arm(1)
+    m = emu.procedural.arm(1)
     s = emu.Scene(m.points, m.tets, warn=False)
     bone = {}
     if bone_ratio is not None:
@@ -202,7 +202,7 @@ CASES = {
         Case(f"hinge (arm), {FRAMES} frames, jumps 0 <-> 1e6", arm, jumps(["flexor", "extensor"], 0.0, 1e6),
               frames=FRAMES),
         Case(f"ball joint (neck), {FRAMES} frames, jumps 0 <-> 1e6", lambda: emu.scenes.neck(1),
-              jumps(list(emu.meshes.NECK_MUSCLES), 0.0, 1e6), frames=FRAMES),
+              jumps(list(emu.procedural.NECK_MUSCLES), 0.0, 1e6), frames=FRAMES),
     ],
     "mesh": [
         Case("two sliver tets (volume x 1e-3)", lambda: sliver_bar(1e-3), {"belly": 1e5}),

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import emu
-from emu.meshes import fusiform
+from emu.build.procedural import fusiform
 
 # the authors' research scenes, beside the repository (/work/shared/data)
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -78,7 +78,7 @@ def bone_muscle_bone(bone_fraction, r=3):
 def gap_scene():
     """Two bones that do not touch (a gap at the elbow), an L-shaped muscle
     between them, and a hinge declared at the corner (axis z)."""
-    pts, tets, lab = emu.meshes.block_mesh(
+    pts, tets, lab = emu.procedural.block_mesh(
         {"upper": [(0, j) for j in range(2, 6)], "lower": [(i, 0) for i in range(2, 6)],
          "muscle": [(1, j) for j in range(1, 5)] + [(i, 1) for i in range(2, 5)]}, 1)
     s = emu.Scene(pts, tets)
@@ -100,7 +100,7 @@ def bone_chain_scene():
 def bone_loop_scene():
     """A closed loop of joints: movable "b" and "c" hinged to each other and each
     to the fixed "a"; muscle "m" from a to b. EMU solves it, FEM refuses it."""
-    pts, tets, lab = emu.meshes.block_mesh({"a": [(0, 0), (3, 1)], "b": [(1, 1)], "c": [(2, 2)], "m": [(0, 1)]}, 1)
+    pts, tets, lab = emu.procedural.block_mesh({"a": [(0, 0), (3, 1)], "b": [(1, 1)], "c": [(2, 2)], "m": [(0, 1)]}, 1)
     s = emu.Scene(pts, tets)
     s.add_bone("a", lab == 0)
     s.add_bone("b", lab == 1, fixed=False)
@@ -132,7 +132,7 @@ def scene_with_fem(request):
 def small_scene(r=2, pin="proximal", tendon_fraction=0.12, **muscle_kw):
     """The built-in fusiform muscle (emu.scenes.fusiform: tendon caps as a stiff
     tendon part, unless tendon_fraction=0) pinned at its proximal end (pin="both":
-    both ends, None: nowhere). Returns (scene, mesh): the mesh (emu.meshes.fusiform)
+    both ends, None: nowhere). Returns (scene, mesh): the mesh (emu.procedural.fusiform)
     for its tendon mask and end faces."""
     s = emu.scenes.fusiform(r, tendon_fraction=tendon_fraction, pins=PIN_SETS[pin], **muscle_kw)
     return s, fusiform(r, tendon_fraction=tendon_fraction)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import emu
-from emu.scenes import fusiform
+from emu.build.scenes import fusiform
 
 
 @pytest.mark.parametrize("target", [0.01, 0.003])
@@ -78,7 +78,7 @@ def test_an_estimate_that_does_not_certify_itself_is_settled_by_fem(monkeypatch)
     Without FEM corrections EMU re-solves at a raised alpha until its estimate
     certifies itself (never reports the uncertified one as reached)."""
     from emu.solve.accuracy import AIM, P_RAISE, RAISE_MAX, SETTLE_RAISE_MAX
-    from emu.scenes import arm
+    from emu.build.scenes import arm
     s = arm(3)
     act = {"flexor": 0.0, "extensor": 8e4}
     first = emu.Solver(s, "emu", alpha=234.0).solve(act)   # no accuracy mode: the certificate as measured
@@ -123,7 +123,7 @@ def test_correct_on_synthetic_corrections():
     step that short -> corrected there."""
     import dataclasses
     import time
-    from emu.geometry import bbox_diagonal
+    from emu.core.geometry import bbox_diagonal
     from emu.solve.solver import SolvePort
     s = fusiform(1, warn=False)
     solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.01)
@@ -279,7 +279,7 @@ def _estimate_stand_in(solver, estimate):
     """Replaces the solver's error estimate by a set one: x1 = the answer with
     vertex 0 moved along x by estimate() of the diagonal (called once per solve;
     vertex 0 lies inside the answer's bounding box, so the diagonal stays)."""
-    from emu.geometry import bbox_diagonal
+    from emu.core.geometry import bbox_diagonal
 
     def fem_correction_of(load, positions):
         x1 = positions.copy()

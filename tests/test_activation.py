@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from emu.activation import Curve
+from emu.core.activation import Curve
 
 
 def test_curve_interpolations():

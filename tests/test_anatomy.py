@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import emu
-import emu.anatomy as anatomy
-from emu.bones import bone_angle, bone_motion
+import emu.build.anatomy as anatomy
+from emu.model.bones import bone_angle, bone_motion
 
 # Each muscle at a quarter of its maximum: the neck turns its head about 37
 # degrees. The tests solve the shipped meshes; on others fTetWild makes, the

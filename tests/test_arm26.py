@@ -14,8 +14,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import emu
-from emu import arm26, datasets
-from emu.author import read_parts, read_surface, surface_defects, surface_volume, winding_numbers
+from emu.build import arm26, datasets
+from emu.build.author import read_parts, read_surface, surface_defects, surface_volume, winding_numbers
 from emu.io.vtk import read_polydata
 from conftest import OPENSIM_FILES
 

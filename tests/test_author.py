@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import emu
-from emu.author import AuthoringError, author, read_parts, surface_defects, surface_volume, winding_numbers
-from emu.shapes import capsule, spindle
+from emu.build.author import AuthoringError, author, read_parts, surface_defects, surface_volume, winding_numbers
+from emu.build.shapes import capsule, spindle
 
 import pytetwild  # noqa: F401  (a dependency: a missing mesher fails here, never skips)
 
@@ -150,7 +150,7 @@ def test_fibres_run_from_one_attachment_to_the_other(tmp_path):
 
 def test_arm_scene_file_runs_and_the_forearm_turns(arm, tmp_path):
     from emu.app.scenefile import load_scene_file
-    from emu.author import write_authored
+    from emu.build.author import write_authored
 
     paths = write_authored(arm, tmp_path / "out", frames=3)
     spec = load_scene_file(paths["scene"])
@@ -278,7 +278,7 @@ kind = "muscle"
 
 
 def test_self_intersections_found_and_reported(tmp_path):
-    from emu.author import self_intersections
+    from emu.build.author import self_intersections
 
     for V, F in (capsule([0, 0, 0], [0, 0, 3], 0.5), spindle([0, 0, 0], [1, 2, 3], 0.7)):
         assert len(self_intersections(V, F)) == 0

@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from emu import blas_kernel
+from emu.core import blas_kernel
 
 AVX512 = {"sse3", "avx", "avx2", "fma", "avx512f", "avx512bw", "avx512vl", "avx512dq", "avx512cd"}
 

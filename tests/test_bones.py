@@ -4,8 +4,8 @@ import pytest
 
 import emu
 from emu._core import testing
-from emu.bones import bone_motion, signed_angle
-from emu.scenes import arm
+from emu.model.bones import bone_motion, signed_angle
+from emu.build.scenes import arm
 from conftest import bone_chain_scene, bone_loop_scene, gap_scene, shared_path
 
 
@@ -97,7 +97,7 @@ def test_bone_coarse_turn_matches_a_fit_of_the_turn(small_arm, which):
     of the bone's field M (the difference of two affine fits), the soft F_t
     of it, and the generic Hessian product of that Z (which fits again); one
     bone, and two bones joined by a hinge (the joint rows in the fit)."""
-    from emu.geometry import deformation_gradients
+    from emu.core.geometry import deformation_gradients
     s = small_arm if which == "arm" else bone_chain_scene()
     act = {"flexor": 0.5} if which == "arm" else {"m1": 0.2, "m2": 0.2}
     solver = emu.Solver(s, "emu", alpha=100)
@@ -173,7 +173,7 @@ def test_movable_bone_errors(small_arm):
     with pytest.raises(ValueError, match="moved by the muscles"):
         emu.solve(s, {}, "fem", bone_poses={"forearm": (np.eye(3), np.zeros(3))})
     # a movable bone welded to the fixed one by a face
-    m = emu.meshes.block_mesh({"a": [(0, 0)], "b": [(1, 0)], "m": [(0, 1), (1, 1)]}, 1)
+    m = emu.procedural.block_mesh({"a": [(0, 0)], "b": [(1, 0)], "m": [(0, 1), (1, 1)]}, 1)
     pts, tets, lab = m
     w = emu.Scene(pts, tets)
     w.add_bone("a", lab == 0)
@@ -263,7 +263,7 @@ def test_a_chain_bone_nothing_turns_is_reported_as_a_neutral_mode():
     c: its turns are free. Both solvers converge, turn b and name c; FEM
     leaves c's turn relative to b alone (EMU's world orientation: either is an
     equilibrium), and both keep c on its joint."""
-    pts, tets, lab = emu.meshes.block_mesh(
+    pts, tets, lab = emu.procedural.block_mesh(
         {"a": [(0, 0, 0)], "b": [(1, 1, 0)], "c": [(2, 2, 1)], "m": [(1, 0, 0)]}, 1)
     s = emu.Scene(pts, tets)
     s.add_bone("a", lab == 0)
@@ -412,7 +412,7 @@ def test_a_stiff_shoulder_spring_converges_in_filtered_steps():
     iterations; with it, it converges and lands as near FEM as with a soft
     spring. In joint coordinates (the default) it converges in a few tens of
     full steps, to the same answer."""
-    from emu.anatomy import upper_limb
+    from emu.build.anatomy import upper_limb
 
     errors = {}
     for k in (0.05, 1.0):
@@ -506,7 +506,7 @@ def test_a_bone_nothing_turns_is_reported_as_a_neutral_mode():
     """A bone on a ball joint with no muscle on it: every turn about the joint
     is free. Both solvers converge (the soft tissue elsewhere settles), leave the
     bone alone and name it."""
-    pts, tets, lab = emu.meshes.block_mesh(
+    pts, tets, lab = emu.procedural.block_mesh(
         {"base": [(0, 0, 0), (0, 0, 1)], "loose": [(1, 1, 2)], "m": [(-1, 0, 0), (-1, 0, 1), (-2, 0, 0)]}, 1)
     s = emu.Scene(pts, tets)
     s.add_bone("base", lab == 0)
@@ -566,7 +566,7 @@ def test_gravity_on_a_movable_bone():
 
 
 def test_rigid_fit_recovers_a_rigid_motion():
-    from emu.bones import rigid_fit
+    from emu.model.bones import rigid_fit
 
     rng = np.random.default_rng(4)
     X = rng.standard_normal((20, 3))
@@ -723,7 +723,7 @@ def _two_shell_scene(with_shell: bool):
     """A fusiform muscle from a fixed bone to a movable one; with_shell: the
     movable bone has a second shell touching nothing (ulna + radius as one
     forearm), a copy of the first set beside the muscle."""
-    from emu.meshes import fusiform
+    from emu.build.procedural import fusiform
     m = fusiform(2, tendon_fraction=0.0)
     z = m.points[m.tets].mean(axis=1)[:, 2]
     lo, hi = 0.2 * m.length, 0.8 * m.length

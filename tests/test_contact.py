@@ -12,8 +12,8 @@ import pytest
 
 import emu
 from emu._core import testing
-from emu.contact import ContactSettings, ContactTerm
-from emu.geometry import boundary_faces
+from emu.model.contact import ContactSettings, ContactTerm
+from emu.core.geometry import boundary_faces
 
 ipctk = pytest.importorskip("ipctk", reason="contact needs ipctk (pip install emu[contact])")
 
@@ -25,7 +25,7 @@ def muscle_vertices(scene, name):
 
 
 def test_boundary_faces_of_a_cube_are_outward_and_closed():
-    points, tets, _ = emu.meshes.block_mesh({"a": [(0, 0)]}, 2)
+    points, tets, _ = emu.procedural.block_mesh({"a": [(0, 0)]}, 2)
     faces, face_tet = boundary_faces(tets, return_tets=True)
     assert len(faces) == 6 * 2 * 2 * 2          # 2 x 2 squares of 2 triangles per side
     p = points[faces]
@@ -288,7 +288,7 @@ def test_a_scene_without_contact_builds_nothing_for_it():
 
 
 def test_pair_filters_allow_exactly_the_pairs_named():
-    from emu.contact import _patches
+    from emu.model.contact import _patches
     allowed = np.array([[0, 1, 1, 1], [1, 0, 1, 1], [1, 1, 0, 0], [1, 1, 0, 0]], bool)  # two bones last
     patch = _patches(allowed, np.arange(4))
     assert patch is not None and patch[2] == patch[3] and len({patch[0], patch[1], patch[2]}) == 3
@@ -339,7 +339,7 @@ def test_self_contact_stops_a_fold(method):
     """One U-shaped muscle, its right arm and base pinned, pushed sideways
     (gravity +x): the free left arm swings into the right one through itself
     without self-contact, and stops at it with."""
-    points, tets, _ = emu.meshes.block_mesh(
+    points, tets, _ = emu.procedural.block_mesh(
         {"u": [(0, 0), (0, 1), (0, 2), (0, 3), (1, 0), (2, 0), (2, 1), (2, 2), (2, 3)]}, 2, 0.01)
     scene = emu.Scene(points, tets)
     scene.add_muscle("u", np.arange(len(tets)), [0.0, 1.0, 0.0])

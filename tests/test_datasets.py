@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from emu import datasets
+from emu.build import datasets
 from conftest import SHARED_DATA as SHARED
 from conftest import SHARED_RAW as RAW
 
@@ -216,7 +216,7 @@ def test_fetch_main(env, monkeypatch, capsys):
 
 
 def test_pooch_is_lazy_and_its_absence_is_explained(env, monkeypatch):
-    code = "import sys, emu, emu.datasets; print('pooch' in sys.modules)"
+    code = "import sys, emu, emu.build.datasets; print('pooch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
     monkeypatch.setitem(sys.modules, "pooch", None)       # import pooch now raises ImportError

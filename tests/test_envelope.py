@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import emu
-from emu.meshes import fusiform
+from emu.build.procedural import fusiform
 
 from conftest import gradient_operator
 from test_solvers import snh_numpy

@@ -9,7 +9,7 @@ import pytest
 
 import emu
 from emu._core import testing
-from emu.scenes import arm, fusiform, neck
+from emu.build.scenes import arm, fusiform, neck
 
 from conftest import bone_chain_scene, bone_loop_scene
 

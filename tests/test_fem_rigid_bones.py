@@ -14,7 +14,7 @@ import pytest
 
 import emu
 from emu._core import testing
-from emu.meshes import block_mesh
+from emu.build.procedural import block_mesh
 
 # bone kinds by what the movable bone touches: an edge of the fixed base (hinge),
 # one vertex (ball), nothing but the muscle (free)

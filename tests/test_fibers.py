@@ -4,8 +4,8 @@ import pytest
 
 import emu
 from conftest import bone_muscle_bone, shared_path
-from emu.fibers import attachments, fiber_angle_degrees, laplace_fibers
-from emu.meshes import fusiform
+from emu.core.fibers import attachments, fiber_angle_degrees, laplace_fibers
+from emu.build.procedural import fusiform
 
 
 def _bar():

@@ -2,44 +2,41 @@
 
 Every module under python/emu is parsed with ``ast`` (imports inside functions
 included): none may import ``emu`` by its absolute name (relative imports
-only), each belongs to a layer and imports only from the layers below it (or
-its own), nothing imports the facade (``emu/__init__`` and ``emu.__main__``), and the module graph has no
-cycle. A new module must be given a layer here.
+only), each belongs to a layer, the folder it lives in (emu/core, emu/model,
+emu/io, emu/build, emu/solve, emu/app), and imports only from the layers below
+it (or its own), nothing imports the facade (``emu/__init__`` and
+``emu.__main__``), and the module graph has no cycle. docs/layout.md draws the
+same layers (tools/layout.py writes it; test_layout.py keeps it current).
 """
 from __future__ import annotations
 
 import ast
+import importlib.util
 from pathlib import Path
 
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "python" / "emu"
 
-# layer -> modules (names relative to emu; "" is the package itself)
-LAYERS = {
-    # numerics and data with no notion of a scene
-    "core": {"_core", "blas_kernel", "geometry", "checks", "activation", "poses", "meshes", "fibers", "runtime", "shapes"},
-    # the scene, its parts and joints, the lowering to the C++ model, built-in scenes
-    "model": {"parts", "joints", "contact", "scene", "lowering", "scenes"},
-    # solving a scene and measuring a solution
-    "solve": {"solve", "solve.accuracy", "solve.advice", "solve.estimate", "solve.load", "solve.options",
-              "solve.solution", "solve.solver", "solve.frames", "bones"},
-    # files in and out (never the solver)
-    "io": {"io", "io.mesh", "io.vtk", "io.obj", "io.plots", "io.usd", "datasets", "author", "anatomy", "arm26"},
-    # the application: command line, scene files, runs, the demo
-    "app": {"app", "app.cli", "app.run", "app.demo", "app.scenefile", "app.sweep"},
-    # the public facade and the import paths the README and pyproject.toml name
-    "facade": {"", "__main__"},
-}
-MAY_IMPORT = {
-    "core": {"core"},
-    "model": {"core", "model"},
-    "solve": {"core", "model", "solve"},
-    "io": {"core", "model", "io"},
-    "app": {"core", "model", "solve", "io", "app"},
-    "facade": {"core", "model", "solve", "io", "app", "facade"},
-}
-LAYER_OF = {f"emu.{m}" if m else "emu": layer for layer, mods in LAYERS.items() for m in mods}
+# The layers are the package's folders (emu/core, emu/model, ...), defined with
+# what each may import in tools/layout.py (which draws docs/layout.md from them);
+# a module's layer is the folder it lives in. The facade is emu/__init__.py and
+# emu/__main__.py; the C++ core, emu._core, is the bottom.
+_spec = importlib.util.spec_from_file_location("layout_tool", PACKAGE.parents[1] / "tools" / "layout.py")
+_layout = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_layout)
+LAYER_FOLDERS, MAY_IMPORT = _layout.LAYER_FOLDERS, _layout.MAY_IMPORT
+
+
+def layer_of(module: str) -> str | None:
+    """The layer of a module by its folder: emu.<folder>[.<module>]; None for a
+    module that lives in no layer folder."""
+    parts = module.split(".")
+    if module in ("emu", "emu.__main__"):
+        return "facade"
+    if module == "emu._core":
+        return "core"
+    return parts[1] if len(parts) >= 2 and parts[1] in LAYER_FOLDERS else None
 
 
 def module_name(path: Path) -> tuple[str, bool]:
@@ -93,18 +90,19 @@ def graph() -> tuple[dict, dict]:
 def layering_errors(edges: dict) -> list:
     errors = []
     for name, targets in edges.items():
-        if name not in LAYER_OF:
-            errors.append(f"{name} is in no layer: add it to LAYERS in tests/test_imports.py")
+        here = layer_of(name)
+        if here is None:
+            errors.append(f"{name} is in no layer: move it into one of the folders emu/{{{', '.join(LAYER_FOLDERS)}}}")
             continue
         for line, target in targets:
-            if target not in LAYER_OF:
+            there = layer_of(target)
+            if there is None:
                 errors.append(f"{name}:{line} imports {target}, which is in no layer")
-            elif LAYER_OF[target] == "facade" and LAYER_OF[name] != "facade":
+            elif there == "facade" and here != "facade":
                 errors.append(f"{name}:{line} imports the facade module {target}; import the module that "
                               "defines the name")
-            elif LAYER_OF[target] not in MAY_IMPORT[LAYER_OF[name]]:
-                errors.append(f"{name}:{line} ({LAYER_OF[name]} layer) imports {target} ({LAYER_OF[target]} "
-                              "layer), a higher layer")
+            elif there not in MAY_IMPORT[here]:
+                errors.append(f"{name}:{line} ({here} layer) imports {target} ({there} layer), a higher layer")
     return errors
 
 
@@ -146,10 +144,10 @@ def test_the_import_graph_has_no_cycle():
     assert not cycles(edges)
 
 
-def test_every_layer_names_existing_modules():
-    mods = set(package_modules()) | {"emu._core"}
-    missing = sorted(set(LAYER_OF) - mods)
-    assert not missing, f"LAYERS names modules that do not exist: {missing}"
+def test_every_layer_folder_exists_and_says_what_it_holds():
+    for folder in LAYER_FOLDERS:
+        init = PACKAGE / folder / "__init__.py"
+        assert init.is_file() and ast.get_docstring(ast.parse(init.read_text())), f"emu/{folder} needs a docstring"
 
 
 # ------------------------------------------------------------- the checker can fail
@@ -164,7 +162,7 @@ def test_checker_flags_absolute_imports(source, name, expect):
 
 
 def test_checker_flags_an_upward_import_and_a_cycle():
-    known = set(LAYER_OF)
+    known = {"emu.app.run", "emu.__main__", "emu.io.mesh", "emu.io"}
     _, up = imports_of("def f():\n    from ..app.run import run_scene\n", "emu.io.vtk", False, known)
     assert up == [(2, "emu.app.run")]
     errors = layering_errors({"emu.io.vtk": up})
@@ -174,6 +172,7 @@ def test_checker_flags_an_upward_import_and_a_cycle():
     _, pkg = imports_of("from .. import _core\nfrom .mesh import read\n", "emu.io", True, known | {"emu._core"})
     assert pkg == [(1, "emu._core"), (2, "emu.io.mesh")]
     assert cycles({"emu.a": [(1, "emu.b")], "emu.b": [(3, "emu.a")]}) == [["emu.a", "emu.b", "emu.a"]]
+    assert "in no layer" in layering_errors({"emu.stray": []})[0]   # a module outside the layer folders
 
 
 def reachable(edges: dict, start: str) -> set:
@@ -191,10 +190,10 @@ def reachable(edges: dict, start: str) -> set:
     return seen
 
 
-@pytest.mark.parametrize("loader", ["emu.app.scenefile", "emu.io", "emu.io.mesh", "emu.io.vtk", "emu.scenes"])
+@pytest.mark.parametrize("loader", ["emu.app.scenefile", "emu.io", "emu.io.mesh", "emu.io.vtk", "emu.build.scenes"])
 def test_file_loaders_do_not_import_the_solver(loader):
     """Reading a scene (a scene file, a mesh) needs no solver: poses live in
-    emu.poses, the model lowering in emu.lowering, the options table and Frame
+    emu.core.poses, the model lowering in emu.model.lowering, the options table and Frame
     in modules of emu.solve that do not load the solver)."""
     edges, _ = graph()
     assert "emu.solve.solver" not in reachable(edges, loader)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import emu
-from emu.meshes import fusiform
+from emu.build.procedural import fusiform
 
 from conftest import small_scene
 
@@ -201,7 +201,7 @@ def test_unreadable_file(tmp_path):
 
 
 def test_boundary_surface_is_closed_and_outward():
-    m = emu.meshes.fusiform(3)
+    m = emu.procedural.fusiform(3)
     f = emu.io.boundary_faces(m.tets)
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
     _, counts = np.unique(edges, axis=0, return_counts=True)
@@ -422,7 +422,7 @@ def test_emu_info_names_a_loop_tendon_attachments_and_the_mesher_defects(tmp_pat
     mesh, where that report describes this mesh."""
     import json
     from emu.app.cli import main
-    pts, tets, lab = emu.meshes.block_mesh({"a": [(0, 0), (3, 1)], "b": [(1, 1)], "c": [(2, 2)],
+    pts, tets, lab = emu.procedural.block_mesh({"a": [(0, 0), (3, 1)], "b": [(1, 1)], "c": [(2, 2)],
                                            "m": [(0, 1)]}, 1)
     path = tmp_path / "loop.vtu"
     emu.io.write(path, pts, tets, cell_data={"part": lab}, part_names={0: "a", 1: "b", 2: "c", 3: "m"})

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import emu
-from emu.scenes import arm
+from emu.build.scenes import arm
 
 from conftest import small_scene
 

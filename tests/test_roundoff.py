@@ -9,7 +9,7 @@ import math
 import pytest
 
 import emu
-from emu.geometry import vertex_error
+from emu.core.geometry import vertex_error
 
 ACT = {"flexor": 0.4}
 STEP_STATUS = "converged: a full step moved no vertex by more than step_tol"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import emu
-from emu.fibers import attachment_fibers
+from emu.core.fibers import attachment_fibers
 from emu.io import boundary_faces
 from emu import run_scene
 from emu import load_scene_file

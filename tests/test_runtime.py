@@ -6,8 +6,9 @@ from __future__ import annotations
 import pytest
 
 import emu
-from emu import _core, runtime
-from emu.runtime import _Sample, free_cores
+from emu import _core
+from emu.core import runtime
+from emu.core.runtime import _Sample, free_cores
 
 
 @pytest.fixture

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import emu
-from emu.joints import Joint
-from emu.geometry import tet_vertices
-from emu.lowering import build_model, tet_fibers
+from emu.model.joints import Joint
+from emu.core.geometry import tet_vertices
+from emu.model.lowering import build_model, tet_fibers
 
 from conftest import bone_muscle_bone, gap_scene
 
@@ -111,7 +111,7 @@ def test_joints_are_dataclasses():
 
 
 def test_a_weld_is_detected():
-    pts, tets, lab = emu.meshes.block_mesh({"a": [(0, 0)], "b": [(1, 0)], "m": [(0, 1), (1, 1)]}, 1, depth=1)
+    pts, tets, lab = emu.procedural.block_mesh({"a": [(0, 0)], "b": [(1, 0)], "m": [(0, 1), (1, 1)]}, 1, depth=1)
     s = emu.Scene(pts, tets, warn=False)
     s.add_bone("a", lab == 0)
     s.add_bone("b", lab == 1)
@@ -136,7 +136,7 @@ def test_bbox_diagonal():
 # ------------------------------------------------------------------ the built-in fusiform scene
 def test_fusiform_scene():
     s = emu.scenes.fusiform(3)
-    m = emu.meshes.fusiform(3)
+    m = emu.procedural.fusiform(3)
     np.testing.assert_array_equal(s.points, m.points)
     assert list(s.parts) == ["belly", "tendons"]
     np.testing.assert_array_equal(s.parts["tendons"].tets, np.flatnonzero(m.is_tendon))
@@ -147,7 +147,7 @@ def test_fusiform_scene():
     assert list(both.parts) == ["belly"] and len(both.parts["belly"].tets) == len(m.tets)
     assert both.parts["belly"].youngs == 5e4
     assert len(both.pinned) == len(m.proximal) + len(m.distal)
-    assert len(emu.scenes.fusiform(tets=3000).tets) == len(emu.meshes.fusiform(tets=3000).tets)
+    assert len(emu.scenes.fusiform(tets=3000).tets) == len(emu.procedural.fusiform(tets=3000).tets)
     assert len(emu.scenes.fusiform(3, pins=()).pinned) == 0
     with pytest.raises(ValueError, match="unknown pin set.*'middle'"):
         emu.scenes.fusiform(2, pins=("middle",))

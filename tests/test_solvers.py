@@ -9,7 +9,7 @@ import scipy.linalg as sl
 
 import emu
 from emu._core import testing
-from emu.meshes import fusiform
+from emu.build.procedural import fusiform
 
 from conftest import gradient_operator, small_scene
 

@@ -3,7 +3,7 @@ builds no bone, joint or Schur structures; each appears with the feature."""
 from __future__ import annotations
 
 import emu
-from emu.scenes import arm, fusiform
+from emu.build.scenes import arm, fusiform
 
 
 def test_pinned_muscle_builds_only_the_acap_factor_and_its_preconditioner():

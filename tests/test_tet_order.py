@@ -8,7 +8,7 @@ import pytest
 
 import emu
 from emu._core import FemSolver, SolverOptions
-from emu.lowering import build_model
+from emu.model.lowering import build_model
 
 
 def with_tets_permuted(scene, perm):

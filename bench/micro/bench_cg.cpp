@@ -14,12 +14,12 @@
 #include <benchmark/benchmark.h>
 
 #include "bar_model.h"
-#include "emu/solvers/acap.h"
-#include "emu/solvers/constant_schur.h"
-#include "emu/solvers/emu_solver.h"
-#include "emu/solvers/emu_solver_testing.h"
+#include "emu/solvers/emu/acap.h"
+#include "emu/solvers/emu/constant_schur.h"
+#include "emu/solvers/emu/emu_solver.h"
+#include "emu/solvers/emu/emu_solver_testing.h"
 #include "emu/solvers/newton/pcg.h"
-#include "emu/solvers/woodbury.h"
+#include "emu/solvers/emu/woodbury.h"
 
 namespace emu {
 

@@ -16,7 +16,7 @@
 #include "emu/energy/snh_eigensystem.h"
 #include "emu/linalg/rounded_block.h"
 #include "emu/linalg/spd_inverse.h"
-#include "emu/solvers/acap.h"
+#include "emu/solvers/emu/acap.h"
 
 using namespace emu;
 

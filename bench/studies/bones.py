@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 import emu
-from emu.bones import bone_angle, bone_motion
+from emu.model.bones import bone_angle, bone_motion
 
 
 

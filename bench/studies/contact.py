@@ -29,7 +29,7 @@ import emu
 import sys
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import start_run
-from emu.contact import ContactSettings, ContactTerm
+from emu.model.contact import ContactSettings, ContactTerm
 from emu.io.plots import contact_sheet
 
 MAX_ACTIVATION = 2e6

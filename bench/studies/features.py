@@ -31,7 +31,7 @@ CHILD = """
 import json, resource, time, warnings
 warnings.simplefilter("ignore")
 import emu
-from emu.scenes import arm, fusiform
+from emu.build.scenes import arm, fusiform
 R, A = {r}, {a}
 {case}
 opts = dict(alpha=100.0, error_estimate=False, max_iterations=10)

@@ -26,7 +26,7 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run
 from error_vs_time import curve
-from emu.geometry import time_within
+from emu.core.geometry import time_within
 
 TARGET_ERROR = 0.01
 # the ratios FEM Newton / EMU at 1%, 1 thread: 3x on the bone scenes

@@ -8,8 +8,8 @@
 
 #include "bind.h"
 #include "emu/model/model.h"
-#include "emu/solvers/emu_solver.h"
-#include "emu/solvers/fem_solver.h"
+#include "emu/solvers/emu/emu_solver.h"
+#include "emu/solvers/fem/fem_solver.h"
 #include "emu/solvers/option_choices.h"
 
 namespace py = pybind11;

@@ -6,8 +6,8 @@
 
 #include "bind.h"
 #include "emu/model/model.h"
-#include "emu/solvers/emu_solver_testing.h"
-#include "emu/solvers/fem_solver_testing.h"
+#include "emu/solvers/emu/emu_solver_testing.h"
+#include "emu/solvers/fem/fem_solver_testing.h"
 
 namespace py = pybind11;
 

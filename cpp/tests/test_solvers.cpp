@@ -11,13 +11,13 @@
 #include "emu/model/tet_order.h"
 #include "emu/linalg/rotation.h"
 #include "emu/energy/joint_spring.h"
-#include "emu/solvers/bone_coarse_space.h"
-#include "emu/solvers/bone_rotations.h"
-#include "emu/solvers/emu_solver.h"
-#include "emu/solvers/emu_solver_testing.h"
-#include "emu/solvers/fem_solver.h"
-#include "emu/solvers/fem_solver_testing.h"
-#include "emu/solvers/joint_coordinates.h"
+#include "emu/solvers/emu/bone_coarse_space.h"
+#include "emu/solvers/emu/bone_rotations.h"
+#include "emu/solvers/emu/emu_solver.h"
+#include "emu/solvers/emu/emu_solver_testing.h"
+#include "emu/solvers/fem/fem_solver.h"
+#include "emu/solvers/fem/fem_solver_testing.h"
+#include "emu/solvers/emu/joint_coordinates.h"
 
 using namespace emu;
 

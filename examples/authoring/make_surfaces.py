@@ -8,7 +8,7 @@ import os
 
 import meshio
 
-from emu.shapes import capsule, spindle
+from emu.build.shapes import capsule, spindle
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SURFACES = {

@@ -25,16 +25,16 @@ import warnings
 
 import numpy as np
 
-from .. import datasets
+from ..build import datasets
 from ..solve.advice import method_hint
-from ..geometry import vertex_error
+from ..core.geometry import vertex_error
 from ..io.mesh import load_scene
-from ..joints import joint_loop, loop_note
+from ..model.joints import joint_loop, loop_note
 from ..io.vtk import write_solution
-from ..runtime import __version__
-from ..runtime import info as runtime_info
-from ..runtime import set_threads
-from ..scenes import fusiform
+from ..core.runtime import __version__
+from ..core.runtime import info as runtime_info
+from ..core.runtime import set_threads
+from ..build.scenes import fusiform
 from ..solve.options import CHOICES, OPTIONS, check_options, parse_option
 from ..solve import Solver
 from .demo import run_demo
@@ -61,69 +61,83 @@ def _print_info(args):
     print(f"      kernel {i['kernel']}")
     print(f"      {i['library']}, {i['blas_threads']} thread(s); OpenMP: {i['omp_threads']} thread(s); "
           f"threads: {i['threads']}")
-    if args.mesh:
-        spec = None
+    if not args.mesh:
+        return 0
+    spec = None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
         if args.mesh.endswith((".toml", ".json")):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                spec = load_scene_file(args.mesh)
+            spec = load_scene_file(args.mesh)
             scene, mesh_file = spec.scene, spec.mesh_path
         else:
             mesh_file = mesh_path(args.mesh)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                scene = load_scene(mesh_file, warn=False, **_parse_parts(args.kind, args.fibers, args.weld))
-        print(scene)
-        for line in scene.mesh_report.lines():
-            print("  " + line)
-        for defect in (_mesh_defects(mesh_file, len(scene.tets)) if mesh_file else []):
-            print(f"  surface defect (found by emu mesh): {defect}")
-        for a, b, n in scene.cracks():
-            print(f"  crack: {a} and {b} touch at {n} vertex pair(s) they do not share (--weld joins them)")
-        for soft, bone, n, area in scene.loose_contacts():
-            print(f"  loose: {soft} lies on {bone} over {n} surface triangle(s), area {area:.3g}, sharing no "
-                  "vertex there (not attached there: mesh the parts as one with emu mesh, or turn contact on "
-                  "if it slides)")
-        for p in scene.parts.values():
-            print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}")
-            if p.kind == "muscle":
-                att = scene.attachments(p.name)
-                desc = [f"{b} ({len(v)} vertices)" for b, v in att.items()]
-                desc += [f"{b} through {t} ({len(v)} vertices)"
-                         for b, (t, v) in scene.tendon_attachments(p.name).items() if b not in att]
-                desc = ", ".join(desc) or "none (pins only)"
-                print(f"    attachments: {desc}")
-        bones = [p.name for p in scene.parts.values() if p.kind == "bone"]
-        if bones:
-            scripted = set(spec.bones) if spec is not None else set()
-            movable = set(scene.movable_bones)
-            desc = ", ".join(f"{b} ({'moved by the muscles' if b in movable else 'scripted' if b in scripted else 'fixed'})"
-                             for b in bones)
-            print(f"  bones: {desc}")
-            for j in scene.joints():
-                where = "a declared point" if j.declared else \
-                    f"vertices {j.vertices.tolist()}" if len(j.vertices) <= 4 else f"{len(j.vertices)} vertices"
-                extra = f", axis {np.round(j.axis, 6).tolist()}" if j.axis is not None else ""
-                print(f"  joint {j.bones[0]} - {j.bones[1]}: {j.kind} at {where}, "
-                      f"centre {np.round(j.centre, 6).tolist()}{extra}")
-            if (pair := joint_loop(scene.joints(), scene.movable_bones)) is not None:
-                print(f"  loop: {loop_note(pair)}")
-        if spec is not None:
-            print(f"  frames: {spec.frames} x {spec.dt:g} s; solver: {spec.solver or 'defaults'}")
-            for name, curve in spec.curves.items():
-                kind = "per frame" if curve.per_frame is not None else f"{len(curve.keys)} keys, {curve.interpolation}"
-                print(f"  activation {name}: {kind}, {'normalised' if curve.normalized else 'absolute'}")
-        ids, _ = scene.model_pins()
-        print(f"  fixed vertices (pins, fixed bones): {len(ids)}")
-        m, n = len(scene.model_tets), len(scene.points)
-        print(f"  memory estimate: FEM ~{(m * 144 * 8 + n * 3 * 60 * 8) / 2**20:.0f} MiB, "
-              f"EMU ~{(m * 9 * 8 * 12 + m * 81 * 8 * 2) / 2**20:.0f} MiB plus the factor")
-        try:
-            scene.validate()
-        except ValueError as e:   # what emu solve / emu run would refuse, said here first
-            print(f"  cannot be solved as it is: {e}")
-            return 1
+            scene = load_scene(mesh_file, warn=False, **_parse_parts(args.kind, args.fibers, args.weld))
+    print(scene)
+    _print_mesh_defects(scene, mesh_file)
+    _print_parts(scene)
+    _print_bones(scene, set(spec.bones) if spec is not None else set())
+    if spec is not None:
+        print(f"  frames: {spec.frames} x {spec.dt:g} s; solver: {spec.solver or 'defaults'}")
+        for name, curve in spec.curves.items():
+            kind = "per frame" if curve.per_frame is not None else f"{len(curve.keys)} keys, {curve.interpolation}"
+            print(f"  activation {name}: {kind}, {'normalised' if curve.normalized else 'absolute'}")
+    ids, _ = scene.model_pins()
+    print(f"  fixed vertices (pins, fixed bones): {len(ids)}")
+    m, n = len(scene.model_tets), len(scene.points)
+    print(f"  memory estimate: FEM ~{(m * 144 * 8 + n * 3 * 60 * 8) / 2**20:.0f} MiB, "
+          f"EMU ~{(m * 9 * 8 * 12 + m * 81 * 8 * 2) / 2**20:.0f} MiB plus the factor")
+    try:
+        scene.validate()
+    except ValueError as e:   # what emu solve / emu run would refuse, said here first
+        print(f"  cannot be solved as it is: {e}")
+        return 1
     return 0
+
+
+def _print_mesh_defects(scene, mesh_file: str) -> None:
+    """emu info: the mesh report, surface defects, cracks and loose contacts."""
+    for line in scene.mesh_report.lines():
+        print("  " + line)
+    for defect in (_mesh_defects(mesh_file, len(scene.tets)) if mesh_file else []):
+        print(f"  surface defect (found by emu mesh): {defect}")
+    for a, b, n in scene.cracks():
+        print(f"  crack: {a} and {b} touch at {n} vertex pair(s) they do not share (--weld joins them)")
+    for soft, bone, n, area in scene.loose_contacts():
+        print(f"  loose: {soft} lies on {bone} over {n} surface triangle(s), area {area:.3g}, sharing no "
+              "vertex there (not attached there: mesh the parts as one with emu mesh, or turn contact on "
+              "if it slides)")
+
+
+def _print_parts(scene) -> None:
+    """emu info: each part, its material and a muscle's attachments."""
+    for p in scene.parts.values():
+        print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}")
+        if p.kind == "muscle":
+            att = scene.attachments(p.name)
+            desc = [f"{b} ({len(v)} vertices)" for b, v in att.items()]
+            desc += [f"{b} through {t} ({len(v)} vertices)"
+                     for b, (t, v) in scene.tendon_attachments(p.name).items() if b not in att]
+            desc = ", ".join(desc) or "none (pins only)"
+            print(f"    attachments: {desc}")
+
+
+def _print_bones(scene, scripted: set) -> None:
+    """emu info: the bones (moved, scripted or fixed), their joints and a loop of joints."""
+    bones = [p.name for p in scene.parts.values() if p.kind == "bone"]
+    if not bones:
+        return
+    movable = set(scene.movable_bones)
+    desc = ", ".join(f"{b} ({'moved by the muscles' if b in movable else 'scripted' if b in scripted else 'fixed'})"
+                     for b in bones)
+    print(f"  bones: {desc}")
+    for j in scene.joints():
+        where = "a declared point" if j.declared else \
+            f"vertices {j.vertices.tolist()}" if len(j.vertices) <= 4 else f"{len(j.vertices)} vertices"
+        extra = f", axis {np.round(j.axis, 6).tolist()}" if j.axis is not None else ""
+        print(f"  joint {j.bones[0]} - {j.bones[1]}: {j.kind} at {where}, "
+              f"centre {np.round(j.centre, 6).tolist()}{extra}")
+    if (pair := joint_loop(scene.joints(), scene.movable_bones)) is not None:
+        print(f"  loop: {loop_note(pair)}")
 
 
 def _demo(args):
@@ -352,7 +366,7 @@ def _sweep(args):
 
 
 def _mesh(args):
-    from ..author import author, format_report, write_authored
+    from ..build.author import author, format_report, write_authored
 
     try:
         result = author(args.parts, quiet=not args.verbose, threads=args.threads or 0)
@@ -414,6 +428,24 @@ def main(argv=None):
     ap = argparse.ArgumentParser(prog="emu", description="EMU muscle simulation (and its FEM reference)")
     ap.add_argument("--version", action="version", version=f"emu {__version__}")
     sub = ap.add_subparsers(dest="cmd", required=True)
+    _add_demo(sub)
+    _add_solve(sub)
+    _add_run(sub)
+    _add_tools(sub)
+    args = ap.parse_args(argv)
+    previous = warnings.showwarning
+    warnings.showwarning = _show_warning
+    try:
+        return args.func(args)
+    except (ValueError, OSError, NotImplementedError, ImportError, datasets.DatasetError) as e:
+        print(f"emu: error: {e}", file=sys.stderr)
+        return 2
+    finally:
+        warnings.showwarning = previous
+
+
+def _add_demo(sub) -> None:
+    """The subcommands for the built-in demo and the fusiform comparison."""
     d = sub.add_parser("demo", help="the built-in arm: a flexor then an extensor swing the forearm about the "
                                     "elbow; frames, PNG contact sheet, angle plot, EMU vs FEM")
     d.add_argument("--out", default="emu_out", help="output folder (default: emu_out)")
@@ -434,6 +466,10 @@ def main(argv=None):
     d.add_argument("--threads", type=_threads, default=None, help=THREADS_HELP)
     d.add_argument("--woodbury", action="store_true", help="also run the paper's Woodbury quasi-Newton step")
     d.set_defaults(func=_compare)
+
+
+def _add_solve(sub) -> None:
+    """The subcommands for one solve of a labelled mesh."""
     s = sub.add_parser("solve", help="solve a labelled mesh at one activation (bones fixed unless --free-bones)")
     s.add_argument("mesh", help="a labelled mesh file, or a research scene name (" + ", ".join(datasets.names()) + ")")
     s.add_argument("--free-bones", nargs="*", metavar="BONE", help="bones the muscles move")
@@ -457,6 +493,10 @@ def main(argv=None):
     s.add_argument("--out", default=None, help="write the result here (.vtu) and a preview picture beside it (.png)")
     s.add_argument("--no-preview", action="store_true", help="with --out: do not write the preview picture")
     s.set_defaults(func=_solve)
+
+
+def _add_run(sub) -> None:
+    """The subcommands for a scene file's frames, and sweeps of them."""
     r = sub.add_parser("run", help="run a scene file (TOML/JSON) over its frames")
     r.add_argument("scene", help="the scene file (TOML or JSON; docs/guide/scene-files.md)")
     r.add_argument("--out", default=None, help="output folder (default: the scene's output.dir)")
@@ -480,6 +520,10 @@ def main(argv=None):
     w.add_argument("--threads", type=_threads, default=None, help="solver threads per case (default: the sweep "
                                                              "file's, 1)")
     w.set_defaults(func=_sweep)
+
+
+def _add_tools(sub) -> None:
+    """The subcommands for meshing, info and data."""
     m = sub.add_parser("mesh", help="mesh one closed surface per part (a parts file, TOML) into one labelled "
                                     "tet mesh and a scene file (fTetWild)")
     m.add_argument("parts", help="the parts file: [mesh] tets or edge_length, [[part]] name/surface/kind, "
@@ -498,16 +542,6 @@ def main(argv=None):
                                     "(default: all); EMU_DATA_DIR: a local copy instead of the network")
     g.add_argument("names", nargs="*", metavar="NAME", help=", ".join(datasets.names()))
     g.set_defaults(func=_data)
-    args = ap.parse_args(argv)
-    previous = warnings.showwarning
-    warnings.showwarning = _show_warning
-    try:
-        return args.func(args)
-    except (ValueError, OSError, NotImplementedError, ImportError, datasets.DatasetError) as e:
-        print(f"emu: error: {e}", file=sys.stderr)
-        return 2
-    finally:
-        warnings.showwarning = previous
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

@@ -15,11 +15,11 @@ import os
 
 import numpy as np
 
-from ..activation import Curve
-from ..bones import bone_angle
-from ..geometry import vertex_error
+from ..core.activation import Curve
+from ..model.bones import bone_angle
+from ..core.geometry import vertex_error
 from ..io.plots import angle_activation_plot, contact_sheet
-from ..anatomy import arm
+from ..build.anatomy import arm
 from ..solve import Solver
 from ..solve.frames import solve_frames
 from .run import run_scene
@@ -76,35 +76,7 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float | Non
                "elbow_angle_deg": angle.tolist(), "time_s": times.tolist()}
     reference = None
     if compare_fem and done:
-        progress("FEM reference for every frame (for EMU's error):")
-        fem = Solver(scene, "fem")
-        fem_angle, errors, fem_s = [], [], 0.0
-        for k, sol in zip(done, solve_frames(fem, spec.frame_loads(done))):
-            fem_s += sol.time_s
-            fem_angle.append(bone_angle(scene, sol.positions, "forearm"))
-            errors.append(vertex_error(kept[k], sol))
-        fem_angle = np.array(fem_angle)
-        reference = {"FEM": fem_angle}
-        summary.update(fem_time_s=fem_s, fem_solve_s=fem_s, fem_elbow_angle_deg=fem_angle.tolist(),
-                       max_angle_difference_deg=float(np.abs(angle - fem_angle).max()),
-                       max_vertex_error=float(max(errors)), emu_vertex_error=[float(e) for e in errors])
-        progress(f"  time over the frames: EMU {summary['emu_time_s']:.2f} s (its solves "
-                 f"{summary['emu_solve_s']:.2f} s, its error estimates {summary['emu_error_estimate_s']:.2f} s), "
-                 f"FEM {fem_s:.2f} s")
-        progress(f"  EMU vs FEM: elbow angle within "
-                 f"{summary['max_angle_difference_deg']:.2f} degrees, vertex error <= "
-                 f"{summary['max_vertex_error']:.2e} of the diagonal ({mode})")
-        corrected = [summary["fem_corrected"][k] for k in done]
-        if any(corrected):
-            progress(f"  {sum(corrected)} of {len(done)} frames FEM-corrected (EMU's estimate missed the accuracy; "
-                     "its answer corrected by FEM Newton steps instead of a re-solve)")
-        # the estimate of EMU's own answers (a corrected frame's is the last correction step's length)
-        est = [summary["emu_error_estimate"][k] for k in done]
-        ratios = [e / t for e, t, c in zip(est, errors, corrected) if e is not None and t > 1e-6 and not c]
-        if ratios:
-            summary["estimate_over_true"] = [float(min(ratios)), float(max(ratios))]
-            progress(f"  EMU's own error estimate (no FEM needed): max {max(e for e in est if e is not None):.2e}; "
-                     f"estimate / true error {min(ratios):.2f} to {max(ratios):.2f} over the frames not corrected")
+        reference = {"FEM": _fem_reference(spec, kept, done, angle, summary, mode, progress)}
     picks = sorted(set(np.linspace(0, len(done) - 1, min(8, len(done))).round().astype(int).tolist()))
     sheet = os.path.join(out, "contact_sheet.png")
     contact_sheet(sheet, scene, [kept[done[i]] for i in picks],
@@ -118,3 +90,38 @@ def run_demo(out: str, resolution: int = 3, frames: int = 25, alpha: float | Non
     progress(f"wrote {out}/: frame_*.vtu + series.pvd (ParaView), frame_*.obj (Blender), log.json, "
              f"contact_sheet.png, elbow_angle.png, summary.json")
     return summary
+
+
+def _fem_reference(spec, kept: dict, done: list, angle, summary: dict, mode: str, progress):
+    """FEM's answers at the demo's frames (warm-started), EMU's errors to them and
+    its estimate's ratio to them into ``summary``; returns FEM's elbow angles."""
+    scene = spec.scene
+    progress("FEM reference for every frame (for EMU's error):")
+    fem = Solver(scene, "fem")
+    fem_angle, errors, fem_s = [], [], 0.0
+    for k, sol in zip(done, solve_frames(fem, spec.frame_loads(done))):
+        fem_s += sol.time_s
+        fem_angle.append(bone_angle(scene, sol.positions, "forearm"))
+        errors.append(vertex_error(kept[k], sol))
+    fem_angle = np.array(fem_angle)
+    summary.update(fem_time_s=fem_s, fem_solve_s=fem_s, fem_elbow_angle_deg=fem_angle.tolist(),
+                   max_angle_difference_deg=float(np.abs(angle - fem_angle).max()),
+                   max_vertex_error=float(max(errors)), emu_vertex_error=[float(e) for e in errors])
+    progress(f"  time over the frames: EMU {summary['emu_time_s']:.2f} s (its solves "
+             f"{summary['emu_solve_s']:.2f} s, its error estimates {summary['emu_error_estimate_s']:.2f} s), "
+             f"FEM {fem_s:.2f} s")
+    progress(f"  EMU vs FEM: elbow angle within "
+             f"{summary['max_angle_difference_deg']:.2f} degrees, vertex error <= "
+             f"{summary['max_vertex_error']:.2e} of the diagonal ({mode})")
+    corrected = [summary["fem_corrected"][k] for k in done]
+    if any(corrected):
+        progress(f"  {sum(corrected)} of {len(done)} frames FEM-corrected (EMU's estimate missed the accuracy; "
+                 "its answer corrected by FEM Newton steps instead of a re-solve)")
+    # the estimate of EMU's own answers (a corrected frame's is the last correction step's length)
+    est = [summary["emu_error_estimate"][k] for k in done]
+    ratios = [e / t for e, t, c in zip(est, errors, corrected) if e is not None and t > 1e-6 and not c]
+    if ratios:
+        summary["estimate_over_true"] = [float(min(ratios)), float(max(ratios))]
+        progress(f"  EMU's own error estimate (no FEM needed): max {max(e for e in est if e is not None):.2e}; "
+                 f"estimate / true error {min(ratios):.2f} to {max(ratios):.2f} over the frames not corrected")
+    return fem_angle

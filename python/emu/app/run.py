@@ -18,11 +18,11 @@ import time
 import numpy as np
 
 from ..solve.advice import method_hint
-from ..bones import bone_angle
+from ..model.bones import bone_angle
 from ..io.obj import boundary_faces, part_groups, write_obj
 from ..io.plots import contact_sheet, default_view, frame_title, motion_views
 from ..io.vtk import write_pvd, write_solution
-from ..runtime import info as runtime_info
+from ..core.runtime import info as runtime_info
 from ..solve import Solver
 from ..solve.frames import solve_frames
 from .scenefile import SceneSpec
@@ -70,99 +70,119 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
     cleared = clear_run(out)
     if cleared:
         progress(f"removed {cleared} file(s) an earlier run wrote in {out}")
-    faces = groups = None
-    if spec.output.get("obj", True):
-        faces, faces_tet = boundary_faces(spec.scene.tets, return_tets=True)
-        groups = part_groups(spec.scene, faces_tet)
+    files = _RunFiles(spec, out, solver)
     info = runtime_info()
     log = {"scene": spec.source, "method": solver.method, "settings": solver.settings, "blas": info["config"],
            "threads": info["omp_threads"], "setup_s": solver.setup_time_s,
            "parts": [{"id": k, "name": p.name, "kind": p.kind, "tets": len(p.tets)}
                      for k, p in enumerate(spec.scene.parts.values())],
            "frames": [], "interrupted": False}
-    pvd = []
-    prev = None
-    usd = None
-    if spec.output.get("usd", False):
-        from ..io.usd import UsdWriter
-
-        usd = UsdWriter(os.path.join(out, "run.usd"), spec.scene, spec.dt,
-                        meters_per_unit=spec.output.get("meters_per_unit", 1.0), fibers=solver.fibers)
-    want_preview = spec.output.get("preview", True)
-    picks = set(np.linspace(0, spec.frames - 1, min(PREVIEW_FRAMES, spec.frames)).round().astype(int).tolist())
-    kept = {}
     t_start = time.perf_counter()
     progress(f"{spec.scene}; {spec.frames} frame(s), {solver.method} (setup {solver.setup_time_s:.2f} s)")
-    hint = method_hint(spec.scene, solver.method, sequence=spec.frames > 1)
+    log["method_hint"] = hint = method_hint(spec.scene, solver.method, sequence=spec.frames > 1)
     if hint:
         progress(hint)
-    log["method_hint"] = hint
     try:
         for k, sol in enumerate(solve_frames(solver, spec.frame_loads())):
             act = spec.activation(k)
-            prev = sol
-            name = f"frame_{k:04d}"
-            if spec.output.get("vtu", True):
-                write_solution(os.path.join(out, name + ".vtu"), spec.scene, sol, activation=act,
-                               fibers=solver.fibers)
-                pvd.append((k * spec.dt, name + ".vtu"))
-            if faces is not None:
-                write_obj(os.path.join(out, name + ".obj"), sol.positions, faces, groups)
-            angles = {name: curve.value(k, k * spec.dt) for name, (_, _, curve) in spec.bones.items()}
-            for name in spec.scene.movable_bones:
-                angles[name] = bone_angle(spec.scene, sol.positions, name)
-            log["frames"].append({"frame": k, "time": k * spec.dt, "activation": act,
-                                  "bone_angles_deg": angles, "converged": sol.converged,
-                                  "status": sol.status, "iterations": sol.iterations,
-                                  "cg_iterations": sol.cg_iterations, "energy": sol.energy,
-                                  "rel_grad_norm": sol.grad_norm / sol.grad_norm0 if sol.grad_norm0 else 0.0,
-                                  "time_s": sol.time_s, "solve_s": sol.solve_time_s,
-                                  "alpha": sol.settings.get("alpha"),
-                                  "error_estimate": sol.error_estimate,
-                                  "error_estimate_s": sol.error_estimate_time_s,
-                                  "accuracy_reached": sol.accuracy_reached, "fem_corrected": sol.corrected,
-                                  "error_estimate_certified": sol.error_estimate_certified,
-                                  "settled_by_fem": _settled(sol), "error_estimate_note": sol.error_estimate_note,
-                                  "inverted_tets": sol.inverted_tets, "contact": sol.contact})
-            if usd is not None:
-                usd.add_frame(k, sol.positions, spec.scene.normalised_activation(act))
-            if want_preview and k in picks:
-                kept[k] = sol.positions.copy()
+            files.frame(k, sol, act)
+            log["frames"].append(_frame_entry(spec, k, sol, act))
             if on_frame is not None:
                 on_frame(k, sol)
-            elapsed = time.perf_counter() - t_start
-            left = elapsed / (k + 1) * (spec.frames - k - 1)
-            flag = "" if sol.converged else f"  NOT converged: {sol.status}"
-            est = "" if sol.error_estimate is None else f", est. error to FEM {sol.error_estimate:.1e}"
-            if sol.inverted_tets:
-                est += f", {sol.inverted_tets} inverted tet(s)"
-            if sol.accuracy_reached is False:
-                est += f" ({sol.error_estimate_note})"
-            if _settled(sol):
-                est += " (estimate not certified: settled by FEM)"
-            elif sol.corrected:
-                est += " (FEM-corrected)"
-            if sol.contact is not None:
-                est += f", {sol.contact['pairs']} contact pair(s), gap {sol.contact['min_distance']:.2g}"
-            progress(f"frame {k + 1}/{spec.frames}: {sol.iterations} it"
-                     + (f" ({sol.cg_iterations} CG)" if sol.cg_iterations else "")
-                     + f", E = {sol.energy:.6g}, {sol.time_s:.2f} s{est}, ~{left:.0f} s left{flag}")
+            left = (time.perf_counter() - t_start) / (k + 1) * (spec.frames - k - 1)
+            progress(_progress_line(k, spec.frames, sol, left))
     except KeyboardInterrupt:
         log["interrupted"] = True
         progress(f"interrupted: kept {len(log['frames'])} finished frame(s)")
     finally:
-        if pvd:
-            write_pvd(os.path.join(out, "series.pvd"), pvd)
-        if usd is not None and usd.frames:
-            usd.save()
-        with open(os.path.join(out, "log.json"), "w") as f:
-            json.dump(log, f, indent=2, default=float)
-        if want_preview and log["frames"]:
-            last = len(log["frames"]) - 1
-            if last not in kept and prev is not None:   # interrupted: show where it stopped
-                kept[last] = prev.positions.copy()
-            _preview(os.path.join(out, "preview.png"), spec, kept, log)
+        files.close(log)
     return log
+
+
+class _RunFiles:
+    """What a run writes as its frames come: a VTU per frame and the .pvd
+    series, OBJ surfaces, run.usd, log.json and preview.png (the frames the
+    preview shows kept until the end), each as spec.output asks."""
+
+    def __init__(self, spec: SceneSpec, out: str, solver):
+        self.spec, self.out, self.fibers = spec, out, solver.fibers
+        self.faces = self.groups = self.usd = None
+        if spec.output.get("obj", True):
+            self.faces, faces_tet = boundary_faces(spec.scene.tets, return_tets=True)
+            self.groups = part_groups(spec.scene, faces_tet)
+        if spec.output.get("usd", False):
+            from ..io.usd import UsdWriter
+
+            self.usd = UsdWriter(os.path.join(out, "run.usd"), spec.scene, spec.dt,
+                                 meters_per_unit=spec.output.get("meters_per_unit", 1.0), fibers=solver.fibers)
+        self.pvd, self.kept, self.last = [], {}, None
+        self.want_preview = spec.output.get("preview", True)
+        self.picks = set(np.linspace(0, spec.frames - 1, min(PREVIEW_FRAMES, spec.frames)).round().astype(int).tolist())
+
+    def frame(self, k: int, sol, act: dict) -> None:
+        spec, name = self.spec, f"frame_{k:04d}"
+        if spec.output.get("vtu", True):
+            write_solution(os.path.join(self.out, name + ".vtu"), spec.scene, sol, activation=act, fibers=self.fibers)
+            self.pvd.append((k * spec.dt, name + ".vtu"))
+        if self.faces is not None:
+            write_obj(os.path.join(self.out, name + ".obj"), sol.positions, self.faces, self.groups)
+        if self.usd is not None:
+            self.usd.add_frame(k, sol.positions, spec.scene.normalised_activation(act))
+        if self.want_preview and k in self.picks:
+            self.kept[k] = sol.positions.copy()
+        self.last = sol
+
+    def close(self, log: dict) -> None:
+        """The series, the USD stage, log.json and the preview (an interrupted run's shows where it stopped)."""
+        if self.pvd:
+            write_pvd(os.path.join(self.out, "series.pvd"), self.pvd)
+        if self.usd is not None and self.usd.frames:
+            self.usd.save()
+        with open(os.path.join(self.out, "log.json"), "w") as f:
+            json.dump(log, f, indent=2, default=float)
+        if self.want_preview and log["frames"]:
+            last = len(log["frames"]) - 1
+            if last not in self.kept and self.last is not None:
+                self.kept[last] = self.last.positions.copy()
+            _preview(os.path.join(self.out, "preview.png"), self.spec, self.kept, log)
+
+
+def _frame_entry(spec: SceneSpec, k: int, sol, act: dict) -> dict:
+    """log.json's record of frame k."""
+    angles = {name: curve.value(k, k * spec.dt) for name, (_, _, curve) in spec.bones.items()}
+    for name in spec.scene.movable_bones:
+        angles[name] = bone_angle(spec.scene, sol.positions, name)
+    return {"frame": k, "time": k * spec.dt, "activation": act,
+            "bone_angles_deg": angles, "converged": sol.converged,
+            "status": sol.status, "iterations": sol.iterations,
+            "cg_iterations": sol.cg_iterations, "energy": sol.energy,
+            "rel_grad_norm": sol.grad_norm / sol.grad_norm0 if sol.grad_norm0 else 0.0,
+            "time_s": sol.time_s, "solve_s": sol.solve_time_s,
+            "alpha": sol.settings.get("alpha"),
+            "error_estimate": sol.error_estimate,
+            "error_estimate_s": sol.error_estimate_time_s,
+            "accuracy_reached": sol.accuracy_reached, "fem_corrected": sol.corrected,
+            "error_estimate_certified": sol.error_estimate_certified,
+            "settled_by_fem": _settled(sol), "error_estimate_note": sol.error_estimate_note,
+            "inverted_tets": sol.inverted_tets, "contact": sol.contact}
+
+
+def _progress_line(k: int, frames: int, sol, left: float) -> str:
+    """The progress line of frame k: its solve, its estimate and how it was reached, the time left."""
+    flag = "" if sol.converged else f"  NOT converged: {sol.status}"
+    est = "" if sol.error_estimate is None else f", est. error to FEM {sol.error_estimate:.1e}"
+    if sol.inverted_tets:
+        est += f", {sol.inverted_tets} inverted tet(s)"
+    if sol.accuracy_reached is False:
+        est += f" ({sol.error_estimate_note})"
+    if _settled(sol):
+        est += " (estimate not certified: settled by FEM)"
+    elif sol.corrected:
+        est += " (FEM-corrected)"
+    if sol.contact is not None:
+        est += f", {sol.contact['pairs']} contact pair(s), gap {sol.contact['min_distance']:.2g}"
+    return (f"frame {k + 1}/{frames}: {sol.iterations} it" + (f" ({sol.cg_iterations} CG)" if sol.cg_iterations else "")
+            + f", E = {sol.energy:.6g}, {sol.time_s:.2f} s{est}, ~{left:.0f} s left{flag}")
 
 
 def _settled(sol) -> bool:

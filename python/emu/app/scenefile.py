@@ -107,13 +107,13 @@ import numpy as np
 
 from ..solve.frames import Frame
 from ..solve.options import METHODS, check_options, scene_file_types
-from ..activation import Curve
-from .. import datasets
+from ..core.activation import Curve
+from ..build import datasets
 from ..io.mesh import load_scene
-from ..parts import lame
-from ..poses import pose_about
-from .. import anatomy
-from ..scenes import elbow_wrap, fusiform
+from ..model.parts import lame
+from ..core.poses import pose_about
+from ..build import anatomy
+from ..build.scenes import elbow_wrap, fusiform
 
 __all__ = ["SceneSpec", "load_scene_file", "SceneFileError"]
 
@@ -255,7 +255,36 @@ def load_scene_file(path) -> SceneSpec:
     path = os.fspath(path)
     data = _read(path)
     _check_table(data, _SCHEMA, "")
-    base = os.path.dirname(os.path.abspath(path))
+    scene, mpath = _mesh_scene(data, os.path.dirname(os.path.abspath(path)))
+    _apply_materials(scene, data.get("materials", {}))
+    _apply_pins(scene, data.get("pins", []))
+    _apply_gravity_and_contact(scene, data)
+    solver = _solver_table(data.get("solver", {}))
+    frames = data.get("frames", {})
+    count, dt = int(frames.get("count", 1)), float(frames.get("dt", 1.0))
+    if count < 1 or dt <= 0:
+        raise SceneFileError(f"frames.count must be >= 1 and frames.dt > 0, got {count}, {dt}")
+    curves = {name: _activation_curve(scene, name, spec, count) for name, spec in data.get("activation", {}).items()}
+    bones = {}
+    for name, spec in data.get("bones", {}).items():
+        script = _bone_table(scene, name, spec)
+        if script is not None:
+            bones[name] = script
+    for name, spec in data.get("joints", {}).items():
+        _add_joint(scene, name, spec)
+    if not scene.muscles and not bones and not np.any(scene.gravity):
+        # nothing drives it: every frame would be the rest shape
+        raise SceneFileError(
+            "the scene has no muscle, no scripted bone and no gravity: nothing moves it, every frame would be "
+            "its rest shape; make a part a muscle ([parts.<name>] kind = \"muscle\" for mesh.path / "
+            "mesh.dataset), script a bone ([bones.<name>] axis, centre, angle) or set gravity")
+    return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, bones=bones,
+                     output=_output_table(data.get("output", {})), source=path, mesh_path=mpath)
+
+
+def _mesh_scene(data: dict, base: str) -> tuple:
+    """(the Scene, the mesh file read or "") of the [mesh] table: a file, a
+    research dataset, a built-in anatomy or the procedural fusiform."""
     mesh = data.get("mesh")
     if mesh is None:
         raise SceneFileError("missing [mesh] table (mesh.path, mesh.dataset or [mesh.fusiform])")
@@ -265,48 +294,60 @@ def load_scene_file(path) -> SceneSpec:
     for key in ("fibers", "weld"):
         if key in mesh and not ("path" in mesh or "dataset" in mesh):
             raise SceneFileError(f"mesh.{key} applies to mesh.path or mesh.dataset only")
-    mpath = ""
     if "path" in mesh or "dataset" in mesh:
-        if "path" in mesh:
-            mpath = mesh["path"] if os.path.isabs(mesh["path"]) else os.path.join(base, mesh["path"])
-            if not os.path.exists(mpath):
-                raise FileNotFoundError(f"mesh.path: file not found: {mpath}")
-        else:
-            if mesh["dataset"] not in datasets.names():
-                raise SceneFileError(f"mesh.dataset: unknown research scene {mesh['dataset']!r} "
-                                     f"(known: {', '.join(datasets.names())})")
-            mpath = datasets.path(mesh["dataset"])
-        fib = mesh.get("fibers", "file")
-        if fib not in ("file", "laplace"):
-            raise SceneFileError(f"mesh.fibers must be 'file' or 'laplace', got {fib!r}")
-        kinds, per_part = {}, {}
-        for name, table in data.get("parts", {}).items():
-            _check_table(table, _PART_KEYS, f"parts.{name}")
-            if "kind" in table:
-                kinds[name] = table["kind"]
-            if "fibers" in table:
-                per_part[name] = table["fibers"]
-        try:   # mesh.fibers for the muscles [parts] does not name
-            scene = load_scene(mpath, fibers=per_part or fib, kinds=kinds, weld=mesh.get("weld", False),
-                               other_fibers=mesh.get("fibers") if per_part else None)
-        except ValueError as e:
-            raise SceneFileError(f"mesh.path {mesh.get('path') or mesh.get('dataset')}: {e}") from None
-    elif "parts" in data:
+        return _mesh_file_scene(data, mesh, base)
+    if "parts" in data:
         raise SceneFileError("[parts.<name>] (kind, fibers) applies to mesh.path or mesh.dataset only")
-    elif any(k in mesh for k in _BUILT_IN):
-        kind = next(k for k in _BUILT_IN if k in mesh)
-        options = dict(mesh[kind])
-        res = int(options.pop("resolution", 2))
-        if res < 1:
-            raise SceneFileError(f"mesh.{kind}.resolution must be >= 1, got {res}")
-        if options.get("shoulder_stiffness", 0.0) < 0:
-            raise SceneFileError(f"mesh.{kind}.shoulder_stiffness must be >= 0, got {options['shoulder_stiffness']}")
-        scene = {"arm": anatomy.arm, "neck": anatomy.neck, "leg": anatomy.leg, "upper_limb": anatomy.upper_limb,
-                 "elbow_wrap": elbow_wrap}[kind](res, **options)
+    if any(k in mesh for k in _BUILT_IN):
+        return _built_in_scene(mesh), ""
+    return fusiform(**mesh["fusiform"], pins=()), ""
+
+
+def _mesh_file_scene(data: dict, mesh: dict, base: str) -> tuple:
+    """(Scene, path) of mesh.path or mesh.dataset, with [parts.<name>] kinds and fibres."""
+    if "path" in mesh:
+        mpath = mesh["path"] if os.path.isabs(mesh["path"]) else os.path.join(base, mesh["path"])
+        if not os.path.exists(mpath):
+            raise FileNotFoundError(f"mesh.path: file not found: {mpath}")
     else:
-        scene = fusiform(**mesh["fusiform"], pins=())
-    named_pins = scene.vertex_sets
-    for part, over in data.get("materials", {}).items():
+        if mesh["dataset"] not in datasets.names():
+            raise SceneFileError(f"mesh.dataset: unknown research scene {mesh['dataset']!r} "
+                                 f"(known: {', '.join(datasets.names())})")
+        mpath = datasets.path(mesh["dataset"])
+    fib = mesh.get("fibers", "file")
+    if fib not in ("file", "laplace"):
+        raise SceneFileError(f"mesh.fibers must be 'file' or 'laplace', got {fib!r}")
+    kinds, per_part = {}, {}
+    for name, table in data.get("parts", {}).items():
+        _check_table(table, _PART_KEYS, f"parts.{name}")
+        if "kind" in table:
+            kinds[name] = table["kind"]
+        if "fibers" in table:
+            per_part[name] = table["fibers"]
+    try:   # mesh.fibers for the muscles [parts] does not name
+        scene = load_scene(mpath, fibers=per_part or fib, kinds=kinds, weld=mesh.get("weld", False),
+                           other_fibers=mesh.get("fibers") if per_part else None)
+    except ValueError as e:
+        raise SceneFileError(f"mesh.path {mesh.get('path') or mesh.get('dataset')}: {e}") from None
+    return scene, mpath
+
+
+def _built_in_scene(mesh: dict):
+    """The built-in anatomy [mesh.<kind>] names, at its resolution and options."""
+    kind = next(k for k in _BUILT_IN if k in mesh)
+    options = dict(mesh[kind])
+    res = int(options.pop("resolution", 2))
+    if res < 1:
+        raise SceneFileError(f"mesh.{kind}.resolution must be >= 1, got {res}")
+    if options.get("shoulder_stiffness", 0.0) < 0:
+        raise SceneFileError(f"mesh.{kind}.shoulder_stiffness must be >= 0, got {options['shoulder_stiffness']}")
+    return {"arm": anatomy.arm, "neck": anatomy.neck, "leg": anatomy.leg, "upper_limb": anatomy.upper_limb,
+            "elbow_wrap": elbow_wrap}[kind](res, **options)
+
+
+def _apply_materials(scene, materials: dict) -> None:
+    """[materials.<part>] overrides, each checked (lame) as it is set."""
+    for part, over in materials.items():
         if part not in scene.parts:
             raise SceneFileError(f"materials.{part}: no part named '{part}' (parts: {', '.join(scene.parts)})")
         _check_table(over, _MATERIAL_KEYS, f"materials.{part}")
@@ -314,8 +355,12 @@ def load_scene_file(path) -> SceneSpec:
         for k, v in over.items():
             setattr(p, k, float(v))
         lame(p.youngs, p.poisson)
-    pins = []
-    for i, item in enumerate(data.get("pins", [])):
+
+
+def _apply_pins(scene, items: list) -> None:
+    """pins: vertex ids or the names of the scene's pin sets."""
+    named_pins, pins = scene.vertex_sets, []
+    for i, item in enumerate(items):
         if isinstance(item, str):
             if item not in named_pins:
                 raise SceneFileError(f"pins[{i}]: unknown pin set '{item}' (known: {', '.join(named_pins) or 'none'})")
@@ -326,6 +371,9 @@ def load_scene_file(path) -> SceneSpec:
             raise SceneFileError(f"pins[{i}] must be a vertex id or a pin-set name, got {item!r}")
     if pins:
         scene.pin(np.concatenate(pins))
+
+
+def _apply_gravity_and_contact(scene, data: dict) -> None:
     if "gravity" in data:
         g = data["gravity"]
         if len(g) != 3 or not all(_type_ok(v, float) for v in g):
@@ -342,7 +390,11 @@ def load_scene_file(path) -> SceneSpec:
                                  distance=c.get("distance"), stiffness=c.get("stiffness"))
         except ValueError as e:
             raise SceneFileError(f"contact: {e}") from None
-    solver = dict(data.get("solver", {}))
+
+
+def _solver_table(table: dict) -> dict:
+    """[solver]: the method and emu.Solver's options, checked before anything runs."""
+    solver = dict(table)
     method = solver.get("method", "emu")
     if method not in METHODS:
         raise SceneFileError(f"solver.method must be \"emu\" or \"fem\", got {method!r}")
@@ -350,86 +402,93 @@ def load_scene_file(path) -> SceneSpec:
         check_options(method, solver.get("step", "newton-krylov"), {k: v for k, v in solver.items() if k != "method"})
     except ValueError as e:
         raise SceneFileError(f"solver.{e}") from None
-    frames = data.get("frames", {})
-    count, dt = int(frames.get("count", 1)), float(frames.get("dt", 1.0))
-    if count < 1 or dt <= 0:
-        raise SceneFileError(f"frames.count must be >= 1 and frames.dt > 0, got {count}, {dt}")
-    curves = {}
-    for name, spec in data.get("activation", {}).items():
-        if name not in scene.muscles:
-            raise SceneFileError(f"activation.{name}: no muscle named '{name}' (muscles: {', '.join(scene.muscles)})")
-        _check_table(spec, _CURVE_KEYS, f"activation.{name}")
-        try:
-            curves[name] = Curve(keys=spec.get("keys"), per_frame=spec.get("per_frame"),
-                                 interpolation=spec.get("interpolation", "linear"),
-                                 normalized=spec.get("normalized", True))
-        except ValueError as e:
-            raise SceneFileError(f"activation.{name}: {e}") from None
-        if curves[name].per_frame is not None and len(curves[name].per_frame) < count:
-            raise SceneFileError(f"activation.{name}.per_frame has {len(curves[name].per_frame)} values for "
-                                 f"{count} frames")
-    bones = {}
-    for name, spec in data.get("bones", {}).items():
-        part = scene.parts.get(name)
-        if part is None or part.kind != "bone":
-            known = [p.name for p in scene.parts.values() if p.kind == "bone"]
-            raise SceneFileError(f"bones.{name}: no bone named '{name}' (bones: {', '.join(known) or 'none'})")
-        _check_table(spec, _BONE_KEYS, f"bones.{name}")
-        if "fixed" in spec:
-            part.fixed = bool(spec["fixed"])
-        if "joint_stiffness" in spec:
-            if not spec["joint_stiffness"] >= 0:
-                raise SceneFileError(f"bones.{name}.joint_stiffness must be >= 0, got {spec['joint_stiffness']!r}")
-            part.joint_stiffness = float(spec["joint_stiffness"])
-        if "acap_weight" in spec:
-            if not spec["acap_weight"] > 0:
-                raise SceneFileError(f"bones.{name}.acap_weight must be positive, got {spec['acap_weight']!r}")
-            part.acap_weight = float(spec["acap_weight"])
-        scripted = [k for k in ("axis", "centre", "angle") if k in spec]
-        if not scripted:
-            continue
-        if not part.fixed:
-            raise SceneFileError(f"bones.{name}: a bone moved by the muscles (fixed = false) cannot be scripted "
-                                 f"({', '.join(scripted)} given)")
-        for key in ("axis", "centre", "angle"):
-            if key not in spec:
-                raise SceneFileError(f"bones.{name}: missing '{key}' (a scripted bone needs axis, centre, angle)")
-        for key in ("axis", "centre"):
-            v = spec[key]
-            if len(v) != 3 or not all(_type_ok(x, float) for x in v):
-                raise SceneFileError(f"bones.{name}.{key} must be three numbers, got {v!r}")
-        if not any(spec["axis"]):
-            raise SceneFileError(f"bones.{name}.axis must be non-zero")
-        try:
-            curve = Curve(keys=spec["angle"], interpolation=spec.get("interpolation", "linear"), signed=True)
-        except ValueError as e:
-            raise SceneFileError(f"bones.{name}.angle: {e}") from None
-        bones[name] = (np.asarray(spec["axis"], float), np.asarray(spec["centre"], float), curve)
-    for name, spec in data.get("joints", {}).items():
-        _check_table(spec, _JOINT_KEYS, f"joints.{name}")
-        for key in ("bones", "centre"):
-            if key not in spec:
-                raise SceneFileError(f"joints.{name}: missing '{key}'")
-        b = spec["bones"]
-        if len(b) != 2 or not all(isinstance(x, str) for x in b):
-            raise SceneFileError(f"joints.{name}.bones must be two bone names, got {b!r}")
-        for key in ("centre", "axis"):
-            v = spec.get(key)
-            if v is not None and (len(v) != 3 or not all(_type_ok(x, float) for x in v)):
-                raise SceneFileError(f"joints.{name}.{key} must be three numbers, got {v!r}")
-        try:
-            scene.add_joint(b[0], b[1], spec["centre"], spec.get("axis"))
-        except ValueError as e:
-            raise SceneFileError(f"joints.{name}: {e}") from None
-    if not scene.muscles and not bones and not np.any(scene.gravity):
-        # nothing drives it: every frame would be the rest shape
-        raise SceneFileError(
-            "the scene has no muscle, no scripted bone and no gravity: nothing moves it, every frame would be "
-            "its rest shape; make a part a muscle ([parts.<name>] kind = \"muscle\" for mesh.path / "
-            "mesh.dataset), script a bone ([bones.<name>] axis, centre, angle) or set gravity")
+    return solver
+
+
+def _activation_curve(scene, name: str, spec: dict, count: int) -> Curve:
+    """[activation.<muscle>]: its curve over the frames."""
+    if name not in scene.muscles:
+        raise SceneFileError(f"activation.{name}: no muscle named '{name}' (muscles: {', '.join(scene.muscles)})")
+    _check_table(spec, _CURVE_KEYS, f"activation.{name}")
+    try:
+        curve = Curve(keys=spec.get("keys"), per_frame=spec.get("per_frame"),
+                      interpolation=spec.get("interpolation", "linear"), normalized=spec.get("normalized", True))
+    except ValueError as e:
+        raise SceneFileError(f"activation.{name}: {e}") from None
+    if curve.per_frame is not None and len(curve.per_frame) < count:
+        raise SceneFileError(f"activation.{name}.per_frame has {len(curve.per_frame)} values for {count} frames")
+    return curve
+
+
+def _bone_table(scene, name: str, spec: dict):
+    """[bones.<name>]: the bone's settings applied; (axis, centre, angle Curve)
+    where it is scripted, else None."""
+    part = scene.parts.get(name)
+    if part is None or part.kind != "bone":
+        known = [p.name for p in scene.parts.values() if p.kind == "bone"]
+        raise SceneFileError(f"bones.{name}: no bone named '{name}' (bones: {', '.join(known) or 'none'})")
+    _check_table(spec, _BONE_KEYS, f"bones.{name}")
+    if "fixed" in spec:
+        part.fixed = bool(spec["fixed"])
+    if "joint_stiffness" in spec:
+        if not spec["joint_stiffness"] >= 0:
+            raise SceneFileError(f"bones.{name}.joint_stiffness must be >= 0, got {spec['joint_stiffness']!r}")
+        part.joint_stiffness = float(spec["joint_stiffness"])
+    if "acap_weight" in spec:
+        if not spec["acap_weight"] > 0:
+            raise SceneFileError(f"bones.{name}.acap_weight must be positive, got {spec['acap_weight']!r}")
+        part.acap_weight = float(spec["acap_weight"])
+    scripted = [k for k in ("axis", "centre", "angle") if k in spec]
+    if not scripted:
+        return None
+    if not part.fixed:
+        raise SceneFileError(f"bones.{name}: a bone moved by the muscles (fixed = false) cannot be scripted "
+                             f"({', '.join(scripted)} given)")
+    return _bone_script(name, spec)
+
+
+def _bone_script(name: str, spec: dict) -> tuple:
+    """(axis, centre, angle Curve) of a scripted bone."""
+    for key in ("axis", "centre", "angle"):
+        if key not in spec:
+            raise SceneFileError(f"bones.{name}: missing '{key}' (a scripted bone needs axis, centre, angle)")
+    for key in ("axis", "centre"):
+        v = spec[key]
+        if len(v) != 3 or not all(_type_ok(x, float) for x in v):
+            raise SceneFileError(f"bones.{name}.{key} must be three numbers, got {v!r}")
+    if not any(spec["axis"]):
+        raise SceneFileError(f"bones.{name}.axis must be non-zero")
+    try:
+        curve = Curve(keys=spec["angle"], interpolation=spec.get("interpolation", "linear"), signed=True)
+    except ValueError as e:
+        raise SceneFileError(f"bones.{name}.angle: {e}") from None
+    return np.asarray(spec["axis"], float), np.asarray(spec["centre"], float), curve
+
+
+def _add_joint(scene, name: str, spec: dict) -> None:
+    """[joints.<name>]: a declared joint between two bones."""
+    _check_table(spec, _JOINT_KEYS, f"joints.{name}")
+    for key in ("bones", "centre"):
+        if key not in spec:
+            raise SceneFileError(f"joints.{name}: missing '{key}'")
+    b = spec["bones"]
+    if len(b) != 2 or not all(isinstance(x, str) for x in b):
+        raise SceneFileError(f"joints.{name}.bones must be two bone names, got {b!r}")
+    for key in ("centre", "axis"):
+        v = spec.get(key)
+        if v is not None and (len(v) != 3 or not all(_type_ok(x, float) for x in v)):
+            raise SceneFileError(f"joints.{name}.{key} must be three numbers, got {v!r}")
+    try:
+        scene.add_joint(b[0], b[1], spec["centre"], spec.get("axis"))
+    except ValueError as e:
+        raise SceneFileError(f"joints.{name}: {e}") from None
+
+
+def _output_table(table: dict) -> dict:
+    """[output] with its defaults; view as two axis indices."""
     output = {"dir": "emu_run", "vtu": True, "obj": True, "preview": True, "view": None, "usd": False,
               "meters_per_unit": 1.0}
-    output.update(data.get("output", {}))
+    output.update(table)
     if not output["meters_per_unit"] > 0:
         raise SceneFileError(f"output.meters_per_unit must be positive, got {output['meters_per_unit']!r}")
     if output["view"] is not None:
@@ -438,5 +497,4 @@ def load_scene_file(path) -> SceneSpec:
             raise SceneFileError(f"output.view must be two different axes of x, y, z (right then up, e.g. "
                                  f"\"yz\"), got {v!r}")
         output["view"] = tuple("xyz".index(c) for c in v)
-    return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, bones=bones, output=output,
-                     source=path, mesh_path=mpath)
+    return output

@@ -163,7 +163,7 @@ def run_case(base: str, params: dict, out: str, plot: str, threads: int) -> dict
     row = {"case": case_id(params), "status": "failed", "error": "", "output": out, **_param_columns(params)}
     t0 = time.perf_counter()
     try:
-        from ..runtime import set_threads
+        from ..core.runtime import set_threads
         from .run import run_scene
         from .scenefile import load_scene_file
 
@@ -247,14 +247,7 @@ def sweep(sweep_file, out: str, *, scheduler: str | None = None, workers: int | 
     threads = spec["threads"] if threads is None else int(threads)
     if threads < 1:
         raise SweepError(f"threads must be >= 1, got {threads}")
-    cores = os.cpu_count() or 1
-    if scheduler is None:
-        workers = max(1, cores // threads) if workers is None else int(workers)
-        if workers < 1:
-            raise SweepError(f"workers must be >= 1, got {workers}")
-        if workers * threads > cores:
-            raise SweepError(f"{workers} workers x {threads} solver threads would oversubscribe this machine's "
-                             f"{cores} cores; use --workers {max(1, cores // threads)} or fewer threads")
+    workers = _local_workers(workers, threads) if scheduler is None else workers
     os.makedirs(out, exist_ok=True)
     table = os.path.join(out, "results.csv")
     previous = _read_results(table)
@@ -268,40 +261,7 @@ def sweep(sweep_file, out: str, *, scheduler: str | None = None, workers: int | 
     progress(f"emu sweep: {len(cases)} case(s), {len(rows)} done already, {len(todo)} to run; "
              f"{threads} solver thread(s) per case")
     if todo:
-        if scheduler is None:
-            cluster = dd.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                      dashboard_address=None)
-            client = dd.Client(cluster)
-            where = f"local cluster, {workers} worker(s)"
-        else:
-            cluster, client = None, dd.Client(scheduler)
-            where = f"scheduler {scheduler}"
-        progress(f"  on {where}")
-        t0 = time.perf_counter()
-        futures = {client.submit(run_case, spec["base"], c, os.path.join(out, f"case_{i}"), spec["plot"], threads,
-                                 key=f"emu-case-{i}", pure=False): i for i, c in todo}
-        failed = done = 0
-        try:
-            for fut in dd.as_completed(futures):
-                row = fut.result()
-                rows[row["case"]] = row
-                done += row["status"] in FINISHED
-                failed += row["status"] not in FINISHED
-                _write_results(table, [rows[i] for i in ids if i in rows])
-                finished = done + failed
-                left = (time.perf_counter() - t0) / finished * (len(todo) - finished)
-                running = min(len(todo) - finished, sum(client.nthreads().values()))
-                msg = f"  case {row['case']}: {row['status']}" + (f" ({row['error']})" if row["error"] else "")
-                progress(f"{msg}; {finished}/{len(todo)} finished ({done} done, {failed} failed), "
-                         f"{running} running, ~{left:.0f} s left")
-        except KeyboardInterrupt:
-            client.cancel(list(futures))
-            progress(f"interrupted: kept {done + failed} finished case(s) in {table}")
-            raise
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+        _run_cases(dd, spec, todo, ids, rows, out, threads, scheduler, workers, progress)
     out_rows = [rows[i] for i in ids if i in rows]
     _write_results(table, out_rows)
     png = os.path.join(out, "sweep.png")
@@ -310,6 +270,58 @@ def sweep(sweep_file, out: str, *, scheduler: str | None = None, workers: int | 
     else:
         progress(f"wrote {table}")
     return out_rows
+
+
+def _local_workers(workers, threads: int) -> int:
+    """A local cluster's worker count: given, or the cores // threads; never more
+    workers x threads than the machine has cores."""
+    cores = os.cpu_count() or 1
+    workers = max(1, cores // threads) if workers is None else int(workers)
+    if workers < 1:
+        raise SweepError(f"workers must be >= 1, got {workers}")
+    if workers * threads > cores:
+        raise SweepError(f"{workers} workers x {threads} solver threads would oversubscribe this machine's "
+                         f"{cores} cores; use --workers {max(1, cores // threads)} or fewer threads")
+    return workers
+
+
+def _run_cases(dd, spec, todo, ids, rows, out, threads, scheduler, workers, progress) -> None:
+    """The cases still to run, on Dask (a local cluster or a scheduler): each
+    finished row into ``rows`` and results.csv as it comes; Ctrl-C cancels the rest."""
+    table = os.path.join(out, "results.csv")
+    if scheduler is None:
+        cluster = dd.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = dd.Client(cluster)
+        where = f"local cluster, {workers} worker(s)"
+    else:
+        cluster, client = None, dd.Client(scheduler)
+        where = f"scheduler {scheduler}"
+    progress(f"  on {where}")
+    t0 = time.perf_counter()
+    futures = {client.submit(run_case, spec["base"], c, os.path.join(out, f"case_{i}"), spec["plot"], threads,
+                             key=f"emu-case-{i}", pure=False): i for i, c in todo}
+    failed = done = 0
+    try:
+        for fut in dd.as_completed(futures):
+            row = fut.result()
+            rows[row["case"]] = row
+            done += row["status"] in FINISHED
+            failed += row["status"] not in FINISHED
+            _write_results(table, [rows[i] for i in ids if i in rows])
+            finished = done + failed
+            left = (time.perf_counter() - t0) / finished * (len(todo) - finished)
+            running = min(len(todo) - finished, sum(client.nthreads().values()))
+            msg = f"  case {row['case']}: {row['status']}" + (f" ({row['error']})" if row["error"] else "")
+            progress(f"{msg}; {finished}/{len(todo)} finished ({done} done, {failed} failed), "
+                     f"{running} running, ~{left:.0f} s left")
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        progress(f"interrupted: kept {done + failed} finished case(s) in {table}")
+        raise
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def plot_results(path: str, rows: list, quantity: str) -> bool:

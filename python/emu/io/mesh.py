@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..checks import weld_coincident
-from ..fibers import attachment_fibers
-from ..scene import MeshWarning, Scene
+from ..core.checks import weld_coincident
+from ..core.fibers import attachment_fibers
+from ..model.scene import MeshWarning, Scene
 
 __all__ = ["TetMesh", "read", "write", "load_scene"]
 
@@ -151,13 +151,7 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_
     fib = mesh.fiber
     part, fib = label_unlabelled_tets(mesh.tets, part, fib, path=path, warn=warn)
     names = {int(p): mesh.part_names.get(int(p), f"part{p}") for p in np.unique(part)}
-    kind_of = {n: mesh.part_kinds.get(pid, "muscle") for pid, n in names.items()}
-    for name, kind in (kinds or {}).items():
-        if name not in kind_of:
-            raise ValueError(f"{path} has no part named '{name}' (parts: {', '.join(kind_of)})")
-        if kind not in ("muscle", "tendon", "bone"):
-            raise ValueError(f"part '{name}': kind must be muscle, tendon or bone, got {kind!r}")
-        kind_of[name] = kind
+    kind_of = _part_kinds(path, {n: mesh.part_kinds.get(pid, "muscle") for pid, n in names.items()}, kinds)
     fiber_of = _fiber_choices(path, fibers, kind_of, fib is not None, other_fibers)
     points, tets = mesh.points, mesh.tets
     if weld:
@@ -173,22 +167,9 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_
         raise ValueError(f"free_bones: {path} has no bone named {', '.join(map(repr, unknown))} "
                          f"(bones: {', '.join(bone_names) or 'none'})")
     for pid, name in names.items():
-        kind = kind_of[name]
         idx = np.flatnonzero(part == pid)
-        if kind == "muscle":
-            how = fiber_of[name]
-            if isinstance(how, str) and how == "laplace":
-                scene.add_muscle(name, idx, None, youngs=muscle_youngs, poisson=poisson)
-            elif isinstance(how, str):
-                scene.add_muscle(name, idx, fib[idx], youngs=muscle_youngs, poisson=poisson)
-            else:
-                scene.add_muscle(name, idx, how, youngs=muscle_youngs, poisson=poisson)
-        elif kind == "tendon":
-            scene.add_tendon(name, idx, poisson=poisson)
-        elif kind == "bone":
-            scene.add_bone(name, idx, youngs=bone_youngs, poisson=poisson, fixed=name not in free_bones)
-        else:
-            raise ValueError(f"{path}: part '{name}' has unknown kind '{kind}' (muscle, tendon or bone)")
+        _add_part(scene, path, name, kind_of[name], idx, fiber_of.get(name), fib, muscle_youngs, bone_youngs,
+                  poisson, fixed=name not in free_bones)
     for name, how in fiber_of.items():
         if isinstance(how, str) and how == "laplace":
             try:
@@ -197,17 +178,51 @@ def load_scene(path, *, muscle_youngs=6e4, bone_youngs=1e10, poisson=0.49, free_
             except ValueError as e:
                 raise ValueError(f"{e}. {FIBER_FIX.format(name=name)}") from None
     if warn:
-        for a, b, n in scene.cracks():
-            warnings.warn(f"{path}: {scene.parts[a].kind} '{a}' and {scene.parts[b].kind} '{b}' touch at {n} "
-                          "vertex pair(s) they do not share: nothing joins them there (a muscle is not attached "
-                          "there); load with weld=True (--weld, [mesh] weld = true) to join them",
-                          MeshWarning, stacklevel=2)
-        for soft, bone, _, area in scene.loose_contacts():
-            warnings.warn(f"{path}: {scene.parts[soft].kind} '{soft}' lies on bone '{bone}' over an area of "
-                          f"{area:.3g} without sharing vertices with it: nothing attaches it there. Mesh the "
-                          "parts as one (emu mesh) if it is attached there; turn contact on if it slides there",
-                          MeshWarning, stacklevel=2)
+        _warn_unjoined(scene, path)
     return scene
+
+
+def _part_kinds(path, kind_of: dict, kinds) -> dict:
+    """{part name: kind}: the file's (or scene.json's) kinds with ``kinds`` over them, checked."""
+    for name, kind in (kinds or {}).items():
+        if name not in kind_of:
+            raise ValueError(f"{path} has no part named '{name}' (parts: {', '.join(kind_of)})")
+        if kind not in ("muscle", "tendon", "bone"):
+            raise ValueError(f"part '{name}': kind must be muscle, tendon or bone, got {kind!r}")
+        kind_of[name] = kind
+    return kind_of
+
+
+def _add_part(scene, path, name, kind, idx, how, fib, muscle_youngs, bone_youngs, poisson, fixed) -> None:
+    """One labelled part into the scene: a muscle with its fibres as ``how`` says
+    ("laplace": computed later, "file": the mesh's, or a direction), a tendon or a bone."""
+    if kind == "muscle":
+        if isinstance(how, str) and how == "laplace":
+            scene.add_muscle(name, idx, None, youngs=muscle_youngs, poisson=poisson)
+        elif isinstance(how, str):
+            scene.add_muscle(name, idx, fib[idx], youngs=muscle_youngs, poisson=poisson)
+        else:
+            scene.add_muscle(name, idx, how, youngs=muscle_youngs, poisson=poisson)
+    elif kind == "tendon":
+        scene.add_tendon(name, idx, poisson=poisson)
+    elif kind == "bone":
+        scene.add_bone(name, idx, youngs=bone_youngs, poisson=poisson, fixed=fixed)
+    else:
+        raise ValueError(f"{path}: part '{name}' has unknown kind '{kind}' (muscle, tendon or bone)")
+
+
+def _warn_unjoined(scene, path) -> None:
+    """MeshWarnings for parts that touch without sharing vertices: cracks and loose contacts."""
+    for a, b, n in scene.cracks():
+        warnings.warn(f"{path}: {scene.parts[a].kind} '{a}' and {scene.parts[b].kind} '{b}' touch at {n} "
+                      "vertex pair(s) they do not share: nothing joins them there (a muscle is not attached "
+                      "there); load with weld=True (--weld, [mesh] weld = true) to join them",
+                      MeshWarning, stacklevel=3)
+    for soft, bone, _, area in scene.loose_contacts():
+        warnings.warn(f"{path}: {scene.parts[soft].kind} '{soft}' lies on bone '{bone}' over an area of "
+                      f"{area:.3g} without sharing vertices with it: nothing attaches it there. Mesh the "
+                      "parts as one (emu mesh) if it is attached there; turn contact on if it slides there",
+                      MeshWarning, stacklevel=3)
 
 
 # What to do when a muscle has no fibres, for each front door.

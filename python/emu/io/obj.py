@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from ..geometry import boundary_faces
+from ..core.geometry import boundary_faces
 
 __all__ = ["boundary_faces", "write_obj", "part_groups"]
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import bbox_diagonal
+from ..core.geometry import bbox_diagonal
 from .obj import boundary_faces
 
 __all__ = ["contact_sheet", "motion_views", "mesh_picture", "angle_activation_plot", "default_view", "frame_title",

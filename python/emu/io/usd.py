@@ -28,7 +28,7 @@ import os
 
 import numpy as np
 
-from ..geometry import boundary_faces, rigid_fit
+from ..core.geometry import boundary_faces, rigid_fit
 from .obj import part_groups
 from .plots import PART_COLOURS, default_view, muscle_colour
 from .vtk import tet_fields

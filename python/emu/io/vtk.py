@@ -6,9 +6,9 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ..checks import signed_volumes
-from ..geometry import deformation_gradients
-from ..lowering import tet_fibers
+from ..core.checks import signed_volumes
+from ..core.geometry import deformation_gradients
+from ..model.lowering import tet_fibers
 from .mesh import write
 
 __all__ = ["write_solution", "write_pvd", "tet_activation", "tet_fields", "read_polydata"]

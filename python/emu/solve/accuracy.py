@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from ..geometry import vertex_error
+from ..core.geometry import vertex_error
 
 __all__ = ["AccuracyMode", "AccuracyPort", "AccuracyWarning"]
 

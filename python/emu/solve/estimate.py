@@ -4,19 +4,35 @@ and the FEM corrections and settling that accuracy mode builds on them
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _core
-from ..geometry import bbox_diagonal, vertex_error
+from ..core.geometry import bbox_diagonal, vertex_error
 from .accuracy import (CERTIFY_CONTRACTION, CERTIFY_STEPS, DEFAULT_ACCURACY, FEM_ACCURACY_CG_FORCING,
                        STEP_FRACTION, STEP_GRAD)
 
-__all__ = ["ErrorEstimator", "ESTIMATE_LAGGED_CG"]
+__all__ = ["Estimate", "ErrorEstimator", "ESTIMATE_LAGGED_CG"]
 
 # The error estimate's FEM corrections: PCG on the last factorisation for at
 # most this many iterations before factorising (SolverOptions::lagged_cg_iterations)
 ESTIMATE_LAGGED_CG = 25
+
+
+@dataclass
+class Estimate:
+    """One solve's error estimate (Solution's fields of the same meaning)."""
+    value: float | None = None        # error_estimate: |x - fem_steps[-1]|
+    certified: bool | None = None     # error_estimate_certified
+    steps: list | None = None         # fem_steps: [x1, x2, ...]
+    note: str = ""                    # error_estimate_note
+    seconds: float = 0.0              # error_estimate_time_s
+
+    @property
+    def x1(self):
+        """FEM's first Newton correction (Solution.fem_correction), or None."""
+        return None if self.steps is None else self.steps[0]
 
 
 class ErrorEstimator:
@@ -40,6 +56,16 @@ class ErrorEstimator:
     def structures(self) -> dict:
         """{name: bytes} of the FEM system once built ({} before)."""
         return {} if self.fem is None else {f"error estimate: {name}": int(b) for name, b in self.fem.structures()}
+
+    def estimate(self, load, positions) -> Estimate:
+        """EMU's error estimate at its answer: FEM's correction x1 and the certificate's steps from it."""
+        x1, seconds, note = self.correction_of(load, positions)
+        if x1 is None:
+            return Estimate(note=note, seconds=seconds)
+        t1 = time.perf_counter()
+        certified, chain, why = self.certify(load, positions, x1)
+        value = vertex_error(positions, chain[-1])   # the FEM point nearest FEM's answer
+        return Estimate(value, certified, chain, note or why, seconds + time.perf_counter() - t1)
 
     def correction_of(self, load, positions) -> tuple:
         """(x1 or None, seconds, note): the linearised correction x1 of FEM's

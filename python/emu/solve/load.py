@@ -8,11 +8,12 @@ import warnings
 import numpy as np
 
 from .. import _core
-from ..geometry import bbox_diagonal, tet_vertices
-from ..lowering import declared_joint_rows, declared_joint_world
-from ..poses import parse_pose
+from ..core.geometry import bbox_diagonal, tet_vertices
+from ..model.lowering import declared_joint_rows, declared_joint_world
+from ..core.poses import parse_pose
+from .solution import Solution
 
-__all__ = ["ActivationWarning", "activation_vector", "load_case"]
+__all__ = ["ActivationWarning", "activation_vector", "load_case", "start_array"]
 
 
 class ActivationWarning(UserWarning):
@@ -53,7 +54,7 @@ def activation_vector(scene, activation=None, normalized: bool = False, warned: 
             warnings.warn(ActivationWarning(
                 f"activation {v:g} of '{name}' is absolute (a stress in the mesh's units; the muscle's "
                 f"maximum is {top:g}), so it barely acts: for a fraction of the maximum pass "
-                "normalized=True (scene files and --activation take fractions)"), stacklevel=4)
+                "normalized=True (scene files and --activation take fractions)"), stacklevel=5)
         a[names.index(name)] = v
     return a
 
@@ -135,3 +136,21 @@ def _check_joints_together(scene, bones, placed) -> None:
             raise ValueError(f"bones '{a}' and '{b}' share vertex {v}, which their poses put "
                              f"{gap.max():.3g} apart; a joint must stay together "
                              "(rotate about the joint: the hinge axis or ball centre)")
+
+
+def start_array(scene, method: str, initial):
+    """A warm start as the core takes it: FEM (n, 3) positions, EMU (m, 3, 3)
+    deformation gradients, from an array of that shape or a Solution of the same method."""
+    if isinstance(initial, Solution):
+        if initial.method != method:
+            raise ValueError(f"cannot warm-start a {method} solve from a {initial.method} solution")
+        initial = initial.F if method == "emu" else initial.positions
+    a = np.asarray(initial, dtype=np.float64)
+    if method == "fem":
+        if a.shape != scene.points.shape:
+            raise ValueError(f"initial positions must have shape {scene.points.shape}, got {a.shape}")
+        return a
+    m = len(scene.tets)
+    if a.shape != (m, 3, 3):
+        raise ValueError(f"initial deformation gradients must have shape ({m}, 3, 3), got {a.shape}")
+    return a

@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 
 from .. import _core
-from ..geometry import bbox_diagonal
+from ..core.geometry import bbox_diagonal
 from .accuracy import (ACCURACY_CG_FORCING_MIN, CERTIFY_CONTRACTION, DEFAULT_ACCURACY, DEFAULT_ALPHA,
                        FEM_ACCURACY_CG_FORCING, STEP_FRACTION, STEP_GRAD)
 

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Solution", "HISTORY_COLUMNS", "PHASES", "phase_times_of"]
+__all__ = ["Solution", "HISTORY_COLUMNS", "PHASES", "phase_times_of", "solution_of"]
 
 HISTORY_COLUMNS = ("iteration", "energy", "grad_norm", "step", "time_s", "cg_iterations", "backtracks")
 
@@ -162,3 +162,24 @@ def phase_times_of(r, estimate_s: float) -> dict:
     times["other"] = max(0.0, float(r.time_s) - sum(times.values()))
     times["error_estimate"] = float(estimate_s)
     return times
+
+
+def solution_of(r, method: str, positions, estimate, *, status: str, setup_time_s: float, settings: dict,
+                time_offset: float, neutral_modes: list, iterates, inverted: int, contact) -> Solution:
+    """The Solution of one core solve r (a SolveResult) with its error estimate
+    (emu.solve.estimate.Estimate); time_offset: seconds since the whole solve began."""
+    h = np.asarray(r.history)
+    history = {name: h[:, i] for i, name in enumerate(HISTORY_COLUMNS)}
+    history["time_s"] = history["time_s"] + time_offset
+    F = None if r.F is None else np.asarray(r.F)   # EMU: per scene tet, identity on fixed bones
+    return Solution(method=method, positions=positions, converged=bool(r.converged), status=status,
+                    iterations=r.iterations, cg_iterations=r.cg_iterations, time_s=r.time_s + estimate.seconds,
+                    solve_time_s=r.time_s, setup_time_s=setup_time_s, energy=r.energy, grad_norm=r.grad_norm,
+                    grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change, history=history, F=F,
+                    settings=settings, filtered_steps=r.filtered_steps, exact_attempts_failed=r.exact_attempts_failed,
+                    factorizations=r.factorizations, negative_curvature_steps=r.negative_curvature_steps,
+                    neutral_modes=neutral_modes, iterates=iterates, error_estimate=estimate.value,
+                    error_estimate_time_s=estimate.seconds, error_estimate_note=estimate.note,
+                    phase_times=phase_times_of(r, estimate.seconds), inverted_tets=inverted,
+                    emu_positions=positions if method == "emu" else None, fem_correction=estimate.x1,
+                    error_estimate_certified=estimate.certified, fem_steps=estimate.steps, contact=contact)

@@ -14,18 +14,18 @@ import warnings
 import numpy as np
 
 from .. import _core
-from ..checks import inverted_tets
-from ..contact import ContactTerm
-from ..geometry import deformation_gradients, vertex_error
-from ..lowering import build_model
-from ..runtime import adapt_threads, set_threads
-from ..scene import Scene
+from ..core.checks import inverted_tets
+from ..model.contact import ContactTerm
+from ..core.geometry import deformation_gradients
+from ..model.lowering import build_model
+from ..core.runtime import adapt_threads, set_threads
+from ..model.scene import Scene
 from .accuracy import ACCURACY_CG_FORCING, AccuracyMode, AccuracyWarning
-from .estimate import ErrorEstimator
-from .load import ActivationWarning, activation_vector, load_case
+from .estimate import Estimate, ErrorEstimator
+from .load import ActivationWarning, activation_vector, load_case, start_array
 from .options import (CHOICES, METHODS, OPTIONS, OptionGroup, check_options, lower, merge_groups, options_text,
                       solver_signature)
-from .solution import HISTORY_COLUMNS, Solution, phase_times_of
+from .solution import Solution, solution_of
 
 __all__ = ["Solver", "Solution", "solve", "METHODS", "STEPS", "NeutralModeWarning", "AccuracyWarning",
            "ActivationWarning"]
@@ -161,7 +161,7 @@ class Solver:
         if on_iteration is not None and not callable(on_iteration):
             raise TypeError(f"on_iteration must be callable, got {type(on_iteration).__name__}")
         iterates = [] if record_iterates else None
-        start = None if initial is None else self._initial_array(initial)
+        start = None if initial is None else start_array(self.scene, self.method, initial)
         self._observers = (on_iteration, iterates)
         threads = adapt_threads()   # fewer where other processes hold cores (emu.runtime)
         t0 = time.perf_counter()
@@ -210,13 +210,13 @@ class Solver:
 
     def _run(self, load, start, t0: float) -> Solution:
         """One solve from start (None: rest; a Solution or a start array as
-        _initial_array makes; (n, 3) positions: EMU from the deformation
+        start_array makes; (n, 3) positions: EMU from the deformation
         gradients of those positions), with its error estimate (EMU); t0 the
         perf_counter of the whole solve's start."""
         if isinstance(start, Solution):
-            start = self._initial_array(start)
+            start = start_array(self.scene, self.method, start)
         elif start is not None and np.shape(start) == self.scene.points.shape and self.method == "emu":
-            start = self._initial_array(deformation_gradients(self.scene.points, self.scene.tets, start))
+            start = start_array(self.scene, self.method, deformation_gradients(self.scene.points, self.scene.tets, start))
         on_iteration, iterates = self._observers
         return self._solve_once(load, start, on_iteration, iterates, time.perf_counter() - t0)
 
@@ -246,67 +246,25 @@ class Solver:
             r = self._core.solve_from(load, start, on_iteration=callback)
         if not np.all(np.isfinite(r.positions)):
             raise FloatingPointError("the solver produced non-finite positions; this is a bug, please report it")
-        h = np.asarray(r.history)
-        history = {name: h[:, i] for i, name in enumerate(HISTORY_COLUMNS)}
-        F = None if r.F is None else np.asarray(r.F)   # EMU: per scene tet, identity on fixed bones
         positions = np.asarray(r.positions)
-        x1, estimate_s, note = (self._estimate.correction_of(load, positions) if self.error_estimate
-                                else (None, 0.0, ""))
-        estimate, certified, chain = None, None, None
-        if x1 is not None:
-            t1 = time.perf_counter()
-            certified, chain, why = self._estimate.certify(load, positions, x1)
-            estimate = vertex_error(positions, chain[-1])   # the FEM point nearest FEM's answer
-            estimate_s += time.perf_counter() - t1
-            note = note or why
-        history["time_s"] = history["time_s"] + time_offset
-        return Solution(method=self.method, positions=positions, converged=bool(r.converged),
-                        status=self._bone_names(r.status), iterations=r.iterations, cg_iterations=r.cg_iterations,
-                        time_s=r.time_s + estimate_s, solve_time_s=r.time_s, setup_time_s=self.setup_time_s,
-                        energy=r.energy,
-                        grad_norm=r.grad_norm, grad_norm0=r.grad_norm0, rel_energy_change=r.rel_energy_change,
-                        history=history, F=F, settings=settings, filtered_steps=r.filtered_steps,
-                        exact_attempts_failed=r.exact_attempts_failed, factorizations=r.factorizations,
-                        negative_curvature_steps=r.negative_curvature_steps,
-                        neutral_modes=self._neutral_modes(r), iterates=iterates, error_estimate=estimate,
-                        error_estimate_time_s=estimate_s, error_estimate_note=note,
-                        phase_times=phase_times_of(r, estimate_s),
-                        inverted_tets=len(inverted_tets(self.scene.tets, positions)),
-                        emu_positions=positions if self.method == "emu" else None, fem_correction=x1,
-                        error_estimate_certified=certified, fem_steps=chain,
-                        contact=self._contact_report(positions))
+        estimate = self._estimate.estimate(load, positions) if self.error_estimate else Estimate()
+        return solution_of(r, self.method, positions, estimate, status=self._bone_names(r.status),
+                           setup_time_s=self.setup_time_s, settings=settings, time_offset=time_offset,
+                           neutral_modes=_neutral_modes(self.scene, r), iterates=iterates,
+                           inverted=len(inverted_tets(self.scene.tets, positions)),
+                           contact=None if self.contact is None else self.contact.report(positions))
 
-    def _contact_report(self, positions):
-        if self.contact is None:
-            return None
-        return {"pairs": self.contact.active_pairs(positions),
-                "min_distance": self.contact.minimum_distance(positions),
-                "intersecting": self.contact.intersecting(positions)}
 
-    def _neutral_modes(self, r) -> list:
-        bones = self.scene.movable_bones
-        modes = [(bones[b], np.asarray(a, float)) for b, a in zip(r.neutral_bones, np.asarray(r.neutral_axes))]
-        for bone, axis in modes:
-            warnings.warn(NeutralModeWarning(
-                f"bone '{bone}' can turn about axis {np.round(axis, 3).tolist()} with nothing resisting it (a "
-                "neutral mode): its equilibrium is not unique and that turn was left alone. Fix the bone, add an "
-                "antagonist muscle, gravity, or a joint_stiffness"), stacklevel=3)
-        return modes
-
-    def _initial_array(self, initial):
-        if isinstance(initial, Solution):
-            if initial.method != self.method:
-                raise ValueError(f"cannot warm-start a {self.method} solve from a {initial.method} solution")
-            initial = initial.F if self.method == "emu" else initial.positions
-        a = np.asarray(initial, dtype=np.float64)
-        if self.method == "fem":
-            if a.shape != self.scene.points.shape:
-                raise ValueError(f"initial positions must have shape {self.scene.points.shape}, got {a.shape}")
-            return a
-        m = len(self.scene.tets)
-        if a.shape != (m, 3, 3):
-            raise ValueError(f"initial deformation gradients must have shape ({m}, 3, 3), got {a.shape}")
-        return a
+def _neutral_modes(scene, r) -> list:
+    """[(bone, unit axis)] of the turns nothing resists in a core result, each warned about."""
+    bones = scene.movable_bones
+    modes = [(bones[b], np.asarray(a, float)) for b, a in zip(r.neutral_bones, np.asarray(r.neutral_axes))]
+    for bone, axis in modes:
+        warnings.warn(NeutralModeWarning(
+            f"bone '{bone}' can turn about axis {np.round(axis, 3).tolist()} with nothing resisting it (a "
+            "neutral mode): its equilibrium is not unique and that turn was left alone. Fix the bone, add an "
+            "antagonist muscle, gravity, or a joint_stiffness"), stacklevel=3)
+    return modes
 
 
 class SolvePort:
