@@ -76,6 +76,21 @@ def plot(path, name, runs, front):
     plt.close(fig)
 
 
+def scene_runs(a, scene, act, normalized) -> list:
+    """[(label, times, errors)] of FEM, lagged FEM and EMU at every alpha and modes count, each
+    against strict FEM's answer."""
+    fem = emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized)
+    runs = [("FEM", *curve(scene, "fem", act, normalized, fem)[:2]),
+            ("FEM lagged-CG", *curve(scene, "fem", act, normalized, fem, lagged_factor=True)[:2])]
+    for alpha in a.alphas:
+        t, e, _ = curve(scene, "emu", act, normalized, fem, alpha=alpha, error_estimate=False)
+        runs.append((f"EMU alpha {alpha:g} k 24", t, e))
+    for k in a.modes:
+        t, e, _ = curve(scene, "emu", act, normalized, fem, alpha=a.modes_alpha, modes=k, error_estimate=False)
+        runs.append((f"EMU alpha {a.modes_alpha:g} k {k}", t, e))
+    return runs
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--scenes", nargs="*", default=["fusiform_20k", "simple_joint_free", "big_muscle_free", "arm_r5",
@@ -95,18 +110,7 @@ def main(argv=None):
     rows, summary = [], {}
     for name in a.scenes:
         scene, act, normalized = SCENES[name]()
-        fem = emu.Solver(scene, "fem", rtol_grad=1e-9).solve(act, normalized=normalized)
-        runs = []
-        t, e, sol = curve(scene, "fem", act, normalized, fem)
-        runs.append(("FEM", t, e))
-        t, e, sol = curve(scene, "fem", act, normalized, fem, lagged_factor=True)
-        runs.append(("FEM lagged-CG", t, e))
-        for alpha in a.alphas:
-            t, e, sol = curve(scene, "emu", act, normalized, fem, alpha=alpha, error_estimate=False)
-            runs.append((f"EMU alpha {alpha:g} k 24", t, e))
-        for k in a.modes:
-            t, e, sol = curve(scene, "emu", act, normalized, fem, alpha=a.modes_alpha, modes=k, error_estimate=False)
-            runs.append((f"EMU alpha {a.modes_alpha:g} k {k}", t, e))
+        runs = scene_runs(a, scene, act, normalized)
         front = pareto([(t, e) for _, t, e in runs])
         png = os.path.join(a.out, f"{name}.png")
         plot(png, f"{name} ({len(scene.tets)} tets)", runs, front)

@@ -83,7 +83,7 @@ def run_example(path, extra: dict) -> dict:
     for x in rows:
         x["fem_s"] = x["base_s"][fastest]
     return {"path": path, "spec": spec, "rows": rows, "frames": frames, "mode": mode, "baseline": fastest,
-            "factorizations": getattr(emu_solver._estimate.fem, "factorizations", 0)}
+            "factorizations": getattr(emu_solver._estimator.fem, "factorizations", 0)}
 
 
 def summary_row(r) -> str:

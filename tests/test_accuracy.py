@@ -146,11 +146,11 @@ def test_correct_on_synthetic_corrections():
             return at(self.steps[d])
 
     def run(own, steps):
-        solver._estimate.fem = Corrections(steps)
+        solver._estimator.fem = Corrections(steps)
         trial = dataclasses.replace(sol, positions=x, fem_correction=at(own), fem_steps=None,
                                     error_estimate=emu.vertex_error(x, at(own)), corrected=False)
         port = SolvePort(solver, load, time.perf_counter())
-        return solver._accuracy.correct(port, trial), trial, solver._estimate.fem.calls
+        return solver._accuracy.correct(port, trial), trial, solver._estimator.fem.calls
 
     (ok, closer), trial, calls = run(0.008, {0.008: 0.0085, 0.0085: 0.0086})
     assert ok and closer is None and trial.corrected and calls == 2
@@ -285,7 +285,7 @@ def _estimate_stand_in(solver, estimate):
         x1 = positions.copy()
         x1[0, 0] += estimate() * bbox_diagonal(positions)
         return x1, 0.0, ""
-    solver._estimate.correction_of = fem_correction_of
+    solver._estimator.first_correction = fem_correction_of
 
 
 def test_alpha_is_not_raised_where_raising_does_not_lower_the_estimate():
@@ -294,7 +294,7 @@ def test_alpha_is_not_raised_where_raising_does_not_lower_the_estimate():
     at a larger alpha, then no more raises, the warning says so, and the
     next solve starts at the alpha this one started at. Before, each solve
     multiplied alpha by the retries' factors (8.5^4 here) and carried it on."""
-    from emu.solve import AccuracyWarning
+    from emu.solve.accuracy import AccuracyWarning
     solver = emu.Solver(fusiform(1, warn=False), "emu", alpha=100.0, accuracy=0.01, fem_correction=False)
     _estimate_stand_in(solver, lambda: 0.02)
     for frame in range(3):
@@ -348,13 +348,13 @@ def test_a_re_solve_starts_from_fem_s_correction():
     s = fusiform(2, warn=False)
     fem = emu.solve(s, {"belly": 5e4}, "fem", rtol_grad=1e-9)
     solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005, fem_correction=False)
-    corrections, estimate = [], solver._estimate.correction_of
+    corrections, estimate = [], solver._estimator.first_correction
 
     def recorded(load, positions):
         out = estimate(load, positions)
         corrections.append(out[0])
         return out
-    solver._estimate.correction_of = recorded
+    solver._estimator.first_correction = recorded
     sol = solver.solve({"belly": 5e4}, record_iterates=True)
     assert sol.settings["alpha_attempts"] >= 2 and emu.vertex_error(sol, fem) <= 0.005
     restart = np.flatnonzero(sol.history["iteration"] == 0)[1]
@@ -396,7 +396,7 @@ def test_lagged_newton_corrections_factorise_nothing():
     fresh = emu._core.FemSolver(solver.model, emu._core.SolverOptions())
     with pytest.raises(RuntimeError, match="lagged Newton"):
         fresh.newton_correction(load, sol.positions, "lagged-newton", 1)   # no factor yet
-    est = solver._estimate.fem
+    est = solver._estimator.fem
     n = est.factorizations
     x = sol.fem_correction
     y = np.asarray(est.newton_correction(load, x, "lagged-newton", 1))

@@ -1,4 +1,4 @@
-"""emu.blas_kernel: OpenBLAS's kernel checked before the C++ core loads it.
+"""emu.core.blas_kernel: OpenBLAS's kernel checked before the C++ core loads it.
 Where OpenBLAS would pick a kernel without AVX2 on a CPU that has AVX2 (a
 virtual machine with a masked CPU model), emu sets OPENBLAS_CORETYPE to the
 kernel the CPU allows; a user's OPENBLAS_CORETYPE is left alone."""

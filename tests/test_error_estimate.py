@@ -100,7 +100,7 @@ def test_a_correction_where_pcg_meets_negative_curvature_skips_the_exact_factori
     act = {"belly": 5e4}
     solver = emu.Solver(s, "emu", alpha=100.0)
     solver.solve(act)   # the estimate's correction leaves a factor to lag on
-    est = solver._estimate.fem
+    est = solver._estimator.fem
     load = solver.load_case(act)
     x = emu.solve(s, act, "emu", alpha=3.0, error_estimate=False).positions
     fresh = emu.Solver(s, "fem")._core
@@ -129,4 +129,4 @@ def test_a_correction_at_an_equilibrium_factorises_nothing():
     # in accuracy mode: the first frame at rest has a zero estimate and leaves no factor
     solver = emu.Solver(s, "emu", accuracy=0.01)
     sol = solver.solve({"belly": 0.0})
-    assert sol.error_estimate < 1e-12 and solver._estimate.fem.factorizations == 0
+    assert sol.error_estimate < 1e-12 and solver._estimator.fem.factorizations == 0

@@ -87,7 +87,7 @@ def test_error_estimate_on_the_lagged_factor_matches_a_fresh_factorisation(kind)
     nudged = {m: 1.05 * a for m, a in act.items()}
     second = solver.solve(nudged, normalized=normalized, initial=first)
     fresh = emu.Solver(scene, "emu", alpha=100)
-    x1, _, note = fresh._estimate.correction_of(fresh.load_case(nudged, normalized), second.positions)
+    x1, _, note = fresh._estimator.first_correction(fresh.load_case(nudged, normalized), second.positions)
     fresh_estimate = emu.vertex_error(second.positions, x1)
     assert note == "" and second.error_estimate is not None
     assert emu.vertex_error(second.positions, second.fem_correction) == pytest.approx(fresh_estimate, rel=1e-2)

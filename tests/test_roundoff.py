@@ -1,7 +1,7 @@
 """Stopping at round-off: EMU's strict solves also stop when a full step moves
 no vertex by more than position_tol of the diagonal (once |g| <= 1e-3 |g_0|),
 and both solvers when the gradient is within noise_factor of its measured
-round-off (the measured floor itself: cpp/tests/test_newton.cpp)."""
+round-off (the measured floor itself: cpp/tests/solvers/newton/test_newton.cpp)."""
 from __future__ import annotations
 
 import math

@@ -6,7 +6,7 @@ measure: no Python function over about 60 lines, no class over about 250).
     python tools/unit_sizes.py --check    # exit 1 where a unit is over its limit
 
 Python units come from ``ast`` (a function's lines from its ``def`` to its
-last statement, decorators and docstring included). C++ units are read from
+last statement, docstring included, decorators not). C++ units are read from
 the text: a class or struct body from its ``{`` to the matching ``}``, a
 function body likewise (a definition: a name and a parameter list followed by
 ``{`` at namespace or class level); comments and string literals are skipped

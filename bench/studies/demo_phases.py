@@ -38,7 +38,7 @@ def run_frames(spec, method: str, references=None, **options) -> dict:
         for p in PHASES:
             totals[p] += sol.phase_times[p]
     # the error estimate's FEM factorisations (its corrections run PCG on the last one first)
-    totals["estimate_factorizations"] = getattr(solver._estimate.fem, "factorizations", None)
+    totals["estimate_factorizations"] = getattr(solver._estimator.fem, "factorizations", None)
     if errors:
         totals["max_error"] = max(errors)
     return totals

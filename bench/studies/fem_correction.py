@@ -42,7 +42,7 @@ def main(argv=None):
         x, cells = own, []
         for _ in range(2):
             t0 = time.perf_counter()
-            x = solver._estimate.fem.newton_correction(load, x, max_steps=solver.error_estimate_steps)
+            x = solver._estimator.fem.newton_correction(load, x, max_steps=solver.error_estimate_steps)
             cells.append(f"{emu.vertex_error(x, ref.positions):.2e} ({time.perf_counter() - t0:.2f})")
         print(f"| {name} | {sol.solve_time_s:.2f} | {emu.vertex_error(own, ref.positions):.2e} | "
               f"{sol.error_estimate:.2e} ({sol.error_estimate_time_s:.2f}) | " + " | ".join(cells) + " |", flush=True)

@@ -43,4 +43,5 @@ __all__ = ["Scene", "Part", "Joint", "MeshWarning", "lame", "Solver", "Solution"
            "AccuracyOptions", "NewtonOptions", "EmuOptions", "FemOptions", "rotation", "pose_about",
            "io", "procedural", "scenes", "shapes", "anatomy", "author", "arm26", "datasets", "fibers", "info", "vertex_error", "error_history", "time_to_error", "bbox_diagonal", "inverted_tets", "bone_angle", "bone_motion", "rigid_fit",
            "signed_angle", "NeutralModeWarning", "AccuracyWarning", "ActivationWarning", "ContactWarning", "contact", "sweep",
-           "run_scene", "load_scene_file", "SceneFileError", "Frame", "solve_frames", "__version__"]
+           "run_scene", "load_scene_file", "SceneFileError", "Frame", "solve_frames", "__version__",
+           "activation", "checks", "geometry", "poses", "runtime", "bones", "joints", "lowering", "options"]

@@ -1,6 +1,6 @@
 #pragma once
 // An energy of the vertex positions evaluated outside the core: contact
-// (python/emu/contact.py: IPC barriers between part surfaces from ipctk).
+// (python/emu/model/contact.py: IPC barriers between part surfaces from ipctk).
 //
 // The solvers call it from serial code only (never inside an OpenMP region),
 // so a callback may take the Python GIL and may throw; the exception leaves

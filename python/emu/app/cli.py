@@ -36,7 +36,7 @@ from ..core.runtime import info as runtime_info
 from ..core.runtime import set_threads
 from ..build.scenes import fusiform
 from ..solve.options import CHOICES, OPTIONS, check_options, parse_option
-from ..solve import Solver
+from ..solve.solver import Solver
 from .demo import run_demo
 from .run import accuracy_summary, run_scene
 from .scenefile import load_scene_file
@@ -64,13 +64,13 @@ def _print_info(args):
     if not args.mesh:
         return 0
     spec = None
+    mesh_file = None if args.mesh.endswith((".toml", ".json")) else mesh_path(args.mesh)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        if args.mesh.endswith((".toml", ".json")):
+        if mesh_file is None:
             spec = load_scene_file(args.mesh)
             scene, mesh_file = spec.scene, spec.mesh_path
         else:
-            mesh_file = mesh_path(args.mesh)
             scene = load_scene(mesh_file, warn=False, **_parse_parts(args.kind, args.fibers, args.weld))
     print(scene)
     _print_mesh_defects(scene, mesh_file)

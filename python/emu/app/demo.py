@@ -20,7 +20,7 @@ from ..model.bones import bone_angle
 from ..core.geometry import vertex_error
 from ..io.plots import angle_activation_plot, contact_sheet
 from ..build.anatomy import arm
-from ..solve import Solver
+from ..solve.solver import Solver
 from ..solve.frames import solve_frames
 from .run import run_scene
 from .scenefile import SceneSpec

@@ -23,7 +23,7 @@ from ..io.obj import boundary_faces, part_groups, write_obj
 from ..io.plots import contact_sheet, default_view, frame_title, motion_views
 from ..io.vtk import write_pvd, write_solution
 from ..core.runtime import info as runtime_info
-from ..solve import Solver
+from ..solve.solver import Solver
 from ..solve.frames import solve_frames
 from .scenefile import SceneSpec
 
@@ -83,8 +83,9 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
     if hint:
         progress(hint)
     try:
-        for k, sol in enumerate(solve_frames(solver, spec.frame_loads())):
-            act = spec.activation(k)
+        loads = spec.frame_loads()
+        for k, sol in enumerate(solve_frames(solver, loads)):
+            act = loads[k].activation
             files.frame(k, sol, act)
             log["frames"].append(_frame_entry(spec, k, sol, act))
             if on_frame is not None:

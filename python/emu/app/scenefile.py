@@ -183,7 +183,7 @@ class SceneSpec:
 
     def frame(self, k: int) -> Frame:
         """Frame k's load: the activations and the scripted bones' poses."""
-        return Frame(activation=self.activation(k), bone_poses=self.bone_poses(k) or None)
+        return Frame(activation=self.activation(k), bone_poses=self.bone_poses(k))
 
     def frame_loads(self, frames=None) -> list:
         """The loads of ``frames`` (frame numbers; None: every frame), for emu.solve_frames."""

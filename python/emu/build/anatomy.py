@@ -22,7 +22,7 @@ target of ANATOMY_TETS x resolution^2 tets; measured: about 2k tets at 1, 4k
 at 2 and 7k at 3 (the arm; the leg and the neck a little more), meshed in
 3, 10 and 20 s. fTetWild's meshes differ slightly from run to run (6.7k or
 6.9k tets for the same arm), so resolutions 1 to 3 ship with the package
-(emu/data/anatomy: every machine solves the same mesh, and nothing is meshed
+(emu/build/data/anatomy: every machine solves the same mesh, and nothing is meshed
 on first use); other resolutions are built once per machine and cached in
 EMU_CACHE_DIR (default: the user's cache folder, emu/anatomy). Both are keyed
 by the shapes and the resolution: a changed shape is meshed afresh.

@@ -34,7 +34,7 @@ _running = _default_threads if _chosen is None else _chosen
 
 def info() -> dict:
     """Which BLAS and how many threads the C++ core runs on: ``kernel``
-    (OpenBLAS's kernel, and who chose it: emu.blas_kernel), ``threads``
+    (OpenBLAS's kernel, and who chose it: emu.core.blas_kernel), ``threads``
     ("auto (up to N)" or the count chosen)."""
     from . import blas_kernel
 

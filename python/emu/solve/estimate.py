@@ -59,7 +59,7 @@ class ErrorEstimator:
 
     def estimate(self, load, positions) -> Estimate:
         """EMU's error estimate at its answer: FEM's correction x1 and the certificate's steps from it."""
-        x1, seconds, note = self.correction_of(load, positions)
+        x1, seconds, note = self.first_correction(load, positions)
         if x1 is None:
             return Estimate(note=note, seconds=seconds)
         t1 = time.perf_counter()
@@ -67,7 +67,7 @@ class ErrorEstimator:
         value = vertex_error(positions, chain[-1])   # the FEM point nearest FEM's answer
         return Estimate(value, certified, chain, note or why, seconds + time.perf_counter() - t1)
 
-    def correction_of(self, load, positions) -> tuple:
+    def first_correction(self, load, positions) -> tuple:
         """(x1 or None, seconds, note): the linearised correction x1 of FEM's
         Newton steps at EMU's positions x (FemSolver::newton_correction: the
         exact step in Newton's regime, else the lower-energy one of the exact
@@ -141,13 +141,13 @@ class ErrorEstimator:
     def _certificate_step(self, load, y):
         """One FEM Newton correction of y for the certificate, or None."""
         if self.contact is None:
-            return self.correction(load, y)
+            return self.lagged_correction(load, y)
         try:   # no lagged factor with contact (its pattern changes): a step of its own
             return np.asarray(self.fem.newton_correction(load, y, max_steps=1))
         except (RuntimeError, ValueError):
             return None
 
-    def correction(self, load, x):
+    def lagged_correction(self, load, x):
         """One FEM Newton correction of positions x by PCG on the estimator's
         last factor (nothing factorised, no filtered fallback), None where that
         fails: accuracy mode's corrections, certified only in Newton's regime."""

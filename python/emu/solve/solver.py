@@ -60,9 +60,9 @@ class Solver:
         options = merge_groups(groups, options)
         check_options(method, options.get("step", OPTIONS["step"].default), options)
         values = {**{n: o.default for n, o in OPTIONS.items()}, **options}
+        low = lower(method, values, scene)   # every value checked before anything changes
         if values["threads"] is not None:
             set_threads(values["threads"])
-        low = lower(method, values, scene)
         self.scene, self.method, self.step = scene, method, values["step"]
         self.accuracy, self.alpha, self.settings = low.accuracy, low.alpha, low.settings
         self.model = build_model(scene)
@@ -84,7 +84,7 @@ class Solver:
         # accuracy mode's controller (EMU): alpha per solve, answers accepted or corrected
         self._accuracy = (AccuracyMode(self.accuracy, self.fem_correction, self.alpha)
                           if self.accuracy is not None and method == "emu" else None)
-        self._estimate = ErrorEstimator(self.model, scene.points, self.contact, self.accuracy,
+        self._estimator = ErrorEstimator(self.model, scene.points, self.contact, self.accuracy,
                                         self.settings["step_fraction"], self.error_estimate_steps, self._named)
         self._observers = (None, None)   # (on_iteration, iterates) of the solve in progress
         self._warned_activation = set()   # muscles whose normalised-looking activation was warned about
@@ -188,7 +188,7 @@ class Solver:
         arrays aside), the error estimate's FEM system once built: a scene
         without bones, joints, gravity or a Schur preconditioner lists none of
         their structures (docs/DESIGN.md, "A scene pays for what it uses")."""
-        return {**{name: int(b) for name, b in self._core.structures()}, **self._estimate.structures()}
+        return {**{name: int(b) for name, b in self._core.structures()}, **self._estimator.structures()}
 
     def set_alpha(self, alpha: float) -> None:
         """EMU: a new alpha (relative to the reference shear modulus) for the
@@ -247,7 +247,7 @@ class Solver:
         if not np.all(np.isfinite(r.positions)):
             raise FloatingPointError("the solver produced non-finite positions; this is a bug, please report it")
         positions = np.asarray(r.positions)
-        estimate = self._estimate.estimate(load, positions) if self.error_estimate else Estimate()
+        estimate = self._estimator.estimate(load, positions) if self.error_estimate else Estimate()
         return solution_of(r, self.method, positions, estimate, status=self._bone_names(r.status),
                            setup_time_s=self.setup_time_s, settings=settings, time_offset=time_offset,
                            neutral_modes=_neutral_modes(self.scene, r), iterates=iterates,
@@ -292,10 +292,10 @@ class SolvePort:
         return self._solver._tight_cg()
 
     def correction(self, x):
-        return self._solver._estimate.correction(self._load, x)
+        return self._solver._estimator.lagged_correction(self._load, x)
 
     def settle(self, x):
-        return self._solver._estimate.settle(self._load, x)
+        return self._solver._estimator.settle(self._load, x)
 
     def inverted(self, x) -> int:
         return len(inverted_tets(self._solver.scene.tets, x))

@@ -1,22 +1,17 @@
-// Assembly, FEM and EMU on a small bar: against dense assembly and finite differences.
+// EMU's units on small meshes: bones on SO(3) and in joint coordinates, the ACAP fit with rigid tets, the
+// gradient and Hessian against finite differences and dense solves, the bone coarse space.
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
 #include <random>
-
 #include "bar_model.h"
 #include "check.h"
-#include "emu/mesh/block_pattern.h"
-#include "emu/mesh/spatial_order.h"
-#include "emu/model/tet_order.h"
-#include "emu/linalg/rotation.h"
 #include "emu/energy/joint_spring.h"
+#include "emu/linalg/rotation.h"
 #include "emu/solvers/emu/bone_coarse_space.h"
 #include "emu/solvers/emu/bone_rotations.h"
 #include "emu/solvers/emu/emu_solver.h"
 #include "emu/solvers/emu/emu_solver_testing.h"
-#include "emu/solvers/fem/fem_solver.h"
-#include "emu/solvers/fem/fem_solver_testing.h"
 #include "emu/solvers/emu/joint_coordinates.h"
 
 using namespace emu;
@@ -28,6 +23,7 @@ LoadCase load(double a) {
   return l;
 }
 }  // namespace
+
 
 // The joint spring E(R) = k/2 (3 - tr R) is linear in R: its Euclidean
 // Hessian is zero and its Riemannian Hessian is the curvature term alone.
@@ -162,207 +158,6 @@ TEST(joint_coordinates_rotation_term_matches_finite_differences) {
   }
 }
 
-TEST(block_assembly_matches_dense_assembly) {
-  const Model m = bar(2, 3);
-  UnknownLayout d(m);
-  BlockPattern pat(m.tets, d.free_index, d.num_free, 3);
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<double> u(-1, 1);
-  std::vector<double> elem(m.tets.rows() * 144);
-  for (Eigen::Index t = 0; t < m.tets.rows(); ++t) {
-    Mat12 K;
-    for (int i = 0; i < 144; ++i) K.data()[i] = u(rng);
-    K = (K + K.transpose()).eval();
-    Eigen::Map<Mat12>(elem.data() + t * 144) = K;
-  }
-  std::vector<double> values(pat.nnz());
-  pat.assemble(elem.data(), values.data());
-  const int n = pat.rows();
-  Eigen::MatrixXd dense = Eigen::MatrixXd::Zero(n, n), sparse = Eigen::MatrixXd::Zero(n, n);
-  for (Eigen::Index t = 0; t < m.tets.rows(); ++t) {
-    const Eigen::Map<const Mat12> K(elem.data() + t * 144);
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b < 4; ++b) {
-        const int va = d.free_index(m.tets(t, a)), vb = d.free_index(m.tets(t, b));
-        if (va >= 0 && vb >= 0) dense.block<3, 3>(3 * va, 3 * vb) += K.block<3, 3>(3 * a, 3 * b);
-      }
-  }
-  for (int j = 0; j < n; ++j)
-    for (int e = pat.col_ptr()[j]; e < pat.col_ptr()[j + 1]; ++e) {
-      CHECK(pat.row_index()[e] <= j);
-      sparse(pat.row_index()[e], j) = values[e];
-    }
-  CHECK((sparse - Eigen::MatrixXd(dense.triangularView<Eigen::Upper>())).norm() <= 1e-12 * dense.norm());
-}
-
-TEST(corner_gather_matches_a_scatter_for_every_width) {
-  // Widths 1 and 3 take the unrolled path, 2 the general one; pinned
-  // vertices (free_index -1) receive nothing.
-  const Model m = bar(2, 3);
-  UnknownLayout d(m);
-  CHECK(d.num_free < m.rest.rows());  // the bar has pinned vertices
-  BlockPattern pat(m.tets, d.free_index, d.num_free, 1);
-  std::mt19937 rng(4);
-  std::uniform_real_distribution<double> u(-1, 1);
-  for (int width : {1, 2, 3}) {
-    std::vector<double> corner(m.tets.rows() * 4 * width);
-    for (double& c : corner) c = u(rng);
-    Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(width, d.num_free);
-    for (Eigen::Index t = 0; t < m.tets.rows(); ++t)
-      for (int a = 0; a < 4; ++a) {
-        const int v = d.free_index(m.tets(t, a));
-        if (v >= 0)
-          for (int c = 0; c < width; ++c) expected(c, v) += corner[(t * 4 + a) * width + c];
-      }
-    Eigen::MatrixXd out = Eigen::MatrixXd::Constant(width, d.num_free, 7.0);  // overwritten
-    pat.gather(corner.data(), width, out.data());
-    CHECK((out - expected).norm() <= 1e-13 * expected.norm());
-  }
-}
-
-TEST(spatial_order_is_a_stable_permutation_along_the_z_curve) {
-  // A bar along z with its tets shuffled: the order runs from one end to the
-  // other with short steps; two tets with the same centroid keep their order in T.
-  const Model m = bar(2, 6);
-  const Eigen::Index nt = m.tets.rows();
-  std::vector<int> shuffle(nt);
-  for (Eigen::Index t = 0; t < nt; ++t) shuffle[t] = static_cast<int>(t);
-  std::shuffle(shuffle.begin(), shuffle.end(), std::mt19937(7));
-  Eigen::MatrixX4i T(nt + 1, 4);
-  for (Eigen::Index t = 0; t < nt; ++t) T.row(t) = m.tets.row(shuffle[t]);
-  T.row(nt) = T.row(0);  // a duplicate of tet 0, listed last
-  const std::vector<int> order = spatial_order(m.rest, T);
-  CHECK(static_cast<Eigen::Index>(order.size()) == nt + 1);
-  std::vector<int> seen(nt + 1, 0);
-  for (int t : order) ++seen[t];
-  CHECK(std::all_of(seen.begin(), seen.end(), [](int k) { return k == 1; }));
-  auto centroid = [&](int t) {
-    Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
-    for (int a = 0; a < 4; ++a) c += m.rest.row(T(t, a));
-    return Eigen::RowVector3d(c / 4);
-  };
-  // The bar is thin along x and y: the curve's first tet lies at one end of z, its last at the other.
-  double zmin = 1e300, zmax = -1e300;
-  for (Eigen::Index t = 0; t <= nt; ++t) zmin = std::min(zmin, centroid(t)(2)), zmax = std::max(zmax, centroid(t)(2));
-  CHECK(centroid(order.front())(2) < zmin + 0.25 * (zmax - zmin));
-  CHECK(centroid(order.back())(2) > zmax - 0.25 * (zmax - zmin));
-  // Locality: consecutive tets in the order are closer than in the shuffled T.
-  double step_order = 0, step_given = 0;
-  for (Eigen::Index k = 1; k <= nt; ++k) {
-    step_order += (centroid(order[k]) - centroid(order[k - 1])).norm();
-    step_given += (centroid(static_cast<int>(k)) - centroid(static_cast<int>(k - 1))).norm();
-  }
-  CHECK(step_order < 0.5 * step_given);
-  const auto first = std::find(order.begin(), order.end(), 0), dup = std::find(order.begin(), order.end(), static_cast<int>(nt));
-  CHECK(first < dup);  // equal codes keep T's order
-  Eigen::MatrixX4i bad = T;
-  bad(0, 0) = static_cast<int>(m.rest.rows());
-  bool threw = false;
-  try {
-    spatial_order(m.rest, bad);
-  } catch (const std::invalid_argument&) {
-    threw = true;
-  }
-  CHECK(threw);
-  CHECK(spatial_order(m.rest, Eigen::MatrixX4i(0, 4)).empty());
-  // The curve itself: eight "tets" collapsed onto the corners of a cube, listed
-  // in a scrambled order, come out x fastest, then y, then z (the Morton code
-  // interleaves the bits of x, y, z in that order).
-  Eigen::MatrixX3d corners(8, 3);
-  const int scrambled[8] = {6, 1, 7, 4, 0, 3, 5, 2};  // the corner at row k is corner scrambled[k]
-  for (int k = 0; k < 8; ++k) {
-    const int i = scrambled[k];
-    corners.row(k) << (i & 1), (i >> 1) & 1, (i >> 2) & 1;
-  }
-  Eigen::MatrixX4i at_corner(8, 4);
-  for (int k = 0; k < 8; ++k) at_corner.row(k).setConstant(k);
-  const std::vector<int> cube = spatial_order(corners, at_corner);
-  bool curve = cube.size() == 8;
-  for (int i = 0; i < 8 && curve; ++i) curve = scrambled[cube[i]] == i;
-  CHECK(curve);
-}
-
-TEST(along_curve_carries_every_per_tet_array_and_the_scene_index) {
-  // A bar given with its tets shuffled and named as scene tets 2 t + 1 of a
-  // scene with 2 #T + 1 tets: the stored model lists them along the curve,
-  // each array and scene_tet moved with its tet.
-  Model m = bar(2, 4);
-  const Eigen::Index nt = m.tets.rows();
-  std::vector<int> shuffle(nt);
-  for (Eigen::Index t = 0; t < nt; ++t) shuffle[t] = static_cast<int>(t);
-  std::shuffle(shuffle.begin(), shuffle.end(), std::mt19937(3));
-  Model given = m;
-  for (Eigen::Index t = 0; t < nt; ++t) {
-    given.tets.row(t) = m.tets.row(shuffle[t]);
-    given.mu(t) = 1.0 + t;  // distinct per tet, to follow them
-    given.acap_weight(t) = 2.0 + t;
-  }
-  given.scene_tet.resize(nt);
-  for (Eigen::Index t = 0; t < nt; ++t) given.scene_tet(t) = static_cast<int>(2 * t + 1);
-  given.num_scene_tets = static_cast<int>(2 * nt + 1);
-  const Model stored = along_curve(given);
-  const std::vector<int> order = spatial_order(given.rest, given.tets);
-  CHECK(stored.num_scene_tets == 2 * nt + 1);
-  for (Eigen::Index i = 0; i < nt; ++i) {
-    const int t = order[i];
-    CHECK(stored.tets.row(i) == given.tets.row(t));
-    CHECK(stored.mu(i) == given.mu(t) && stored.acap_weight(i) == given.acap_weight(t));
-    CHECK(stored.scene_tet(i) == 2 * t + 1 && stored.scene_index(i) == 2 * t + 1);
-  }
-  // the solvers store it so, and give EMU's F back per scene tet
-  EmuSolverOptions eo;
-  eo.alpha = 100.0 * m.mu(0);
-  EmuSolver emu(given, SolverOptions(), eo);
-  CHECK(emu.model().scene_tet == stored.scene_tet);
-  LoadCase l;
-  l.activation = Eigen::VectorXd::Constant(1, 2.0);
-  const SolveResult r = emu.solve(l);
-  CHECK(r.F.rows() == 2 * nt + 1 && r.F.cols() == 9);
-  for (Eigen::Index s = 0; s < r.F.rows(); s += 2)  // scene tets 0, 2, 4, ...: no unknowns, identity
-    CHECK(r.F.row(s) == (Eigen::RowVectorXd(9) << 1, 0, 0, 0, 1, 0, 0, 0, 1).finished());
-  CHECK((r.F.row(1) - (Eigen::RowVectorXd(9) << 1, 0, 0, 0, 1, 0, 0, 0, 1).finished()).norm() > 1e-6);
-  // a warm start from that F (scene rows) is already converged
-  const SolveResult again = emu.solve(l, &r.F);
-  CHECK(again.converged && again.iterations <= 1);
-  // scene_tet naming a tet twice is refused
-  Model bad = given;
-  bad.scene_tet(1) = bad.scene_tet(0);
-  bool threw = false;
-  try {
-    along_curve(bad);
-  } catch (const std::invalid_argument&) {
-    threw = true;
-  }
-  CHECK(threw);
-}
-
-TEST(fem_gradient_matches_energy_and_solve_converges) {
-  const Model m = bar(2, 5);
-  FemSolver fem(m, SolverOptions{});
-  const LoadCase l = load(3e4);
-  std::mt19937 rng(5);
-  std::normal_distribution<double> n(0, 0.02);
-  Eigen::MatrixX3d x = m.rest;
-  for (Eigen::Index i = 0; i < x.size(); ++i) x.data()[i] += n(rng);
-  for (Eigen::Index i = 0; i < m.pinned.size(); ++i) x.row(m.pinned(i)) = m.rest.row(m.pinned(i));
-  const Eigen::MatrixX3d g = FemSolverTesting::gradient(fem, l, x);
-  const double h = 1e-6;
-  for (int v : {10, 20, 40}) {
-    for (int c = 0; c < 3; ++c) {
-      Eigen::MatrixX3d a = x, b = x;
-      a(v, c) += h;
-      b(v, c) -= h;
-      CHECK_CLOSE(g(v, c),
-                  (FemSolverTesting::energy(fem, l, a) - FemSolverTesting::energy(fem, l, b)) / (2 * h), 1e-5 * (1 + g.norm()));
-    }
-  }
-  const SolveResult r = fem.solve(l);
-  CHECK(r.converged);
-  CHECK(r.grad_norm <= 1e-6 * r.grad_norm0);
-  // the bar shortens along its fibres
-  CHECK(r.positions.col(2).maxCoeff() < m.rest.col(2).maxCoeff());
-}
-
 TEST(emu_gradient_matches_energy) {
   const Model m = bar(2, 3);
   EmuSolverOptions eo;
@@ -402,31 +197,6 @@ TEST(emu_with_all_modes_inverts_the_exact_hessian) {
   CHECK((HY - R).norm() <= 1e-8 * R.norm());
 }
 
-TEST(emu_and_fem_agree_as_alpha_grows) {
-  const Model m = bar(2, 4);
-  FemSolver fem(m, SolverOptions{});
-  const LoadCase l = load(3e4);
-  const SolveResult rf = fem.solve(l);
-  CHECK(rf.converged);
-  double prev = 1e9;
-  const double diag = (m.rest.colwise().maxCoeff() - m.rest.colwise().minCoeff()).norm();
-  for (double rel : {10.0, 100.0, 1000.0}) {
-    EmuSolverOptions eo;
-    eo.alpha = rel * m.mu(0);
-    EmuSolver emu(m, SolverOptions{}, eo);
-    const SolveResult re = emu.solve(l);
-    CHECK(re.converged);
-    const double err = (re.positions - rf.positions).rowwise().norm().maxCoeff() / diag;
-    CHECK(err < prev);
-    prev = err;
-  }
-  CHECK(prev < 1e-2);
-}
-
-// The constant Schur preconditioner in single precision (S0's factor and the
-// block inverses rounded to float; EmuSolverOptions::single_precision_preconditioner,
-// the default): the preconditioner changes CG's path, not the answer, and CG
-// needs about as many iterations as in double.
 TEST(emu_single_precision_preconditioner_changes_cg_not_the_answer) {
   const Model m = bar(3, 16);
   const LoadCase l = load(3e4);
@@ -666,5 +436,6 @@ TEST(bone_coarse_space_matches_the_dense_balancing_preconditioner) {
     CHECK((flat(out) - want).norm() <= 1e-10 * want.norm());
   }
 }
+
 
 TEST_MAIN()

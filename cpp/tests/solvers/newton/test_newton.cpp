@@ -5,7 +5,11 @@
 
 #include <Eigen/Dense>
 
+#include <limits>
+
 #include "check.h"
+#include "emu/solvers/newton/convergence.h"
+#include "emu/solvers/newton/line_search.h"
 #include "emu/solvers/newton/newton_driver.h"
 #include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
@@ -387,6 +391,39 @@ TEST(pcg_model_decrease_is_the_quadratic_model_and_its_truncation_test_holds_whe
   CHECK(k * (q(d1) - q(d)) <= c * std::abs(q(d)) * (1 + 1e-12));
   CHECK((k - 1) * (q(d2) - q(d1)) > c * std::abs(q(d1)));
   CHECK((b - H * d1).norm() <= tol);
+}
+
+// Armijo backtracking on E(s) = (s - 0.3)^2 from s = 1 (slope -0.6 at 0):
+// halves to 0.5 (E = 0.04 <= 0.09 - 1e-4 * 0.5 * 0.6); a non-finite energy is a rejected step.
+TEST(armijo_backtracking_halves_until_the_energy_falls_enough) {
+  SolverOptions o;
+  const auto E = [](double s) { return (s - 0.3) * (s - 0.3); };
+  const LineSearchResult r = armijo_backtracking(E, E(0.0), -0.6, o);
+  CHECK(r.success && r.step == 0.5 && r.backtracks == 1);
+  CHECK_CLOSE(r.energy, 0.04, 1e-15);
+  const LineSearchResult nan = armijo_backtracking(
+      [&](double s) { return s > 0.2 ? std::numeric_limits<double>::quiet_NaN() : E(s); }, E(0.0), -0.6, o);
+  CHECK(nan.success && nan.step <= 0.2);
+  // no step lowers a flat energy: failure after max_backtracks, and the round-off rule decides
+  const LineSearchResult flat = armijo_backtracking([](double) { return 1.0; }, 1.0, -1.0, o);
+  CHECK(!flat.success && flat.backtracks == o.max_backtracks);
+  CHECK(accept_at_roundoff(1.0, 0.5, 1.0, 1.0, 2.0));
+  CHECK(!accept_at_roundoff(1.0 + 1e-6, 0.5, 1.0, 1.0, 2.0));
+  CHECK(!accept_at_roundoff(1.0, 2.0, 1.0, 1.0, 2.0));
+}
+
+// The stopping test: both the gradient and the energy decrease must be small;
+// a gradient under the round-off floor stops at once; a start at rest is converged.
+TEST(convergence_needs_both_tests_or_the_floor) {
+  Convergence c{1e-6, 1e-10, 10.0, 1.0, 1e-12};
+  CHECK(!c.initial());
+  CHECK(!c.test(5.0, 4.9, 1e-7));              // decrease 0.1 of a total 5.1: not converged
+  CHECK(!c.test(4.0, 4.0 - 1e-12, 1e-3));      // tiny decrease but a large gradient
+  CHECK(c.test(4.0, 4.0 - 1e-12, 1e-7));
+  CHECK_CLOSE(c.rel_energy_change, 1e-12 / 6.0, 1e-15);
+  CHECK(c.test(5.0, 4.0, 1e-13));              // under the floor
+  Convergence at_rest{1e-6, 1e-10, 0.0, 1e-14, 1e-12};
+  CHECK(at_rest.initial());
 }
 
 TEST_MAIN()

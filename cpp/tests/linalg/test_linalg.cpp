@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "check.h"
+#include "emu/linalg/chunked_sum.h"
 #include "emu/linalg/blas_info.h"
 #include "emu/linalg/cholmod_factor.h"
 #include "emu/linalg/merged_pattern_factor.h"
@@ -624,6 +625,39 @@ TEST(spd_inverse_matches_the_dense_inverse_and_refuses_indefinite_blocks) {
   B << 4, 1, 0, 1, 3, 1, 0, 1, 2;
   Eigen::Matrix3d Binv;
   CHECK(spd_inverse<3>(B, Binv) && (Binv - B.inverse()).norm() < 1e-14);
+}
+
+// The chunked sum gives the same bits on one thread and on several (fixed
+// chunks, summed in chunk order), and the vector form the same as the scalar one.
+TEST(chunked_sum_has_the_same_bits_for_any_thread_count) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd a(10007), b(10007);
+  for (Eigen::Index i = 0; i < a.size(); ++i) {
+    a(i) = u(rng) * std::pow(10.0, 8 * u(rng));   // wide magnitudes: the order of summation shows
+    b(i) = u(rng);
+  }
+#ifdef _OPENMP
+  const int before = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const double one = chunked_dot(a, b);
+  omp_set_num_threads(std::max(2, before));
+  const double several = chunked_dot(a, b);
+  omp_set_num_threads(before);
+  CHECK(one == several);
+#endif
+  CHECK_CLOSE(chunked_dot(a, b), a.dot(b), 1e-9 * a.cwiseAbs().dot(b.cwiseAbs()));
+  Eigen::MatrixXd parts;
+  Eigen::VectorXd out;
+  chunked_sum_into(
+      a.size(), 2,
+      [&](Eigen::Index lo, Eigen::Index hi, auto part) {
+        part.setZero();
+        for (Eigen::Index i = lo; i < hi; ++i) part += Eigen::Vector2d(a(i), a(i) * b(i));
+      },
+      parts, out);
+  CHECK_CLOSE(out(0), a.sum(), 1e-9 * a.cwiseAbs().sum());
+  CHECK(out(1) == chunked_dot(a, b));   // the same chunks, summed in the same order
 }
 
 TEST_MAIN()
