@@ -86,7 +86,6 @@ class Solver:
                           if self.accuracy is not None and method == "emu" else None)
         self._estimator = ErrorEstimator(self.model, scene.points, self.contact, self.accuracy,
                                         self.settings["step_fraction"], self.error_estimate_steps, self._named)
-        self._observers = (None, None)   # (on_iteration, iterates) of the solve in progress
         self._warned_activation = set()   # muscles whose normalised-looking activation was warned about
 
     def _build_core(self, low):
@@ -162,10 +161,9 @@ class Solver:
             raise TypeError(f"on_iteration must be callable, got {type(on_iteration).__name__}")
         iterates = [] if record_iterates else None
         start = None if initial is None else start_array(self.scene, self.method, initial)
-        self._observers = (on_iteration, iterates)
         threads = adapt_threads()   # fewer where other processes hold cores (emu.runtime)
         t0 = time.perf_counter()
-        port = SolvePort(self, load, t0)
+        port = SolvePort(self, load, t0, on_iteration, iterates)
         sol = self._accuracy.solve(port, start) if self._accuracy is not None else port.run(start)
         sol.settings = {**sol.settings, "threads": threads}
         sol.time_s = time.perf_counter() - t0   # the whole solve, estimates and corrections included
@@ -208,16 +206,16 @@ class Solver:
         self.alpha = float(alpha)
         self.settings.update(alpha=self.alpha, alpha_absolute=self._core.alpha)
 
-    def _run(self, load, start, t0: float) -> Solution:
+    def _run(self, load, start, t0: float, on_iteration=None, iterates=None) -> Solution:
         """One solve from start (None: rest; a Solution or a start array as
         start_array makes; (n, 3) positions: EMU from the deformation
         gradients of those positions), with its error estimate (EMU); t0 the
-        perf_counter of the whole solve's start."""
+        perf_counter of the whole solve's start; on_iteration and iterates as
+        Solver.solve takes and records them."""
         if isinstance(start, Solution):
             start = start_array(self.scene, self.method, start)
         elif start is not None and np.shape(start) == self.scene.points.shape and self.method == "emu":
             start = start_array(self.scene, self.method, deformation_gradients(self.scene.points, self.scene.tets, start))
-        on_iteration, iterates = self._observers
         return self._solve_once(load, start, on_iteration, iterates, time.perf_counter() - t0)
 
     @contextlib.contextmanager
@@ -271,8 +269,9 @@ class SolvePort:
     """The AccuracyPort of one solve (emu.solve.accuracy): the Solver's EMU runs
     and its estimator's FEM steps under the solve's load, timed from its start."""
 
-    def __init__(self, solver: Solver, load, t0: float):
+    def __init__(self, solver: Solver, load, t0: float, on_iteration=None, iterates=None):
         self._solver, self._load, self._t0 = solver, load, t0
+        self._observers = (on_iteration, iterates)   # Solver.solve's, for every run of this solve
 
     @property
     def alpha(self) -> float:
@@ -283,7 +282,7 @@ class SolvePort:
         return self._solver.contact is not None
 
     def run(self, start) -> Solution:
-        return self._solver._run(self._load, start, self._t0)
+        return self._solver._run(self._load, start, self._t0, *self._observers)
 
     def set_alpha(self, alpha: float) -> None:
         self._solver._set_alpha(alpha)
