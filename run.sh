@@ -46,7 +46,9 @@ cpp_tests() {
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libbenchmark-dev >/dev/null
   }
   cmake -S . -B build/ctest -DEMU_BUILD_TESTS=ON -DEMU_BUILD_MICROBENCH=ON -DCMAKE_BUILD_TYPE=Release >/dev/null
+  echo "[emu] setup done at ${SECONDS} s"
   cmake --build build/ctest -j "$(nproc)" >/dev/null
+  echo "[emu] C++ tests built at ${SECONDS} s"
   (cd build/ctest && ctest --output-on-failure)
 }
 
@@ -54,6 +56,11 @@ cpp_tests() {
 # operators, lagged factor, contact, fuzzing and the stress suite: about 5 minutes)
 SANITIZED_TESTS="tests/test_energy.py tests/test_solvers.py tests/test_bones.py tests/test_emu_operators.py
   tests/test_lagged_factor.py tests/test_contact.py tests/test_fuzz.py tests/stress"
+# the constant Schur preconditioner's numpy check in two of its eight settings (each flag both
+# ways): the same C++ paths, and the dense numpy reference is most of its time under ASan
+for p in 0.0-300.0-0.12 0.2-300.0-0.0 0.0-30.0-0.12 0.2-30.0-0.0 0.0-300.0-0.0 0.2-30.0-0.12; do
+  SANITIZED_TESTS="$SANITIZED_TESTS --deselect tests/test_emu_operators.py::test_constant_schur_preconditioner_against_numpy[$p]"
+done
 
 sanitize() {
   # the C++ core, its tests and the extension under AddressSanitizer +
@@ -65,7 +72,9 @@ sanitize() {
   python="$("$PY" -c 'import sys; print(sys.executable)')"   # the interpreter itself, not a shim script
   cmake --preset sanitize -Dpybind11_DIR="$("$PY" -m pybind11 --cmakedir)" -DPython_EXECUTABLE="$python" >/dev/null
   cmake --build --preset sanitize -j "$(nproc)" >/dev/null
+  echo "[emu] sanitize build done at ${SECONDS} s"
   ctest --preset sanitize
+  echo "[emu] sanitized C++ tests done at ${SECONDS} s"
   runtimes="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)"
   # shellcheck disable=SC2086
   LD_PRELOAD="$runtimes" ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:strict_string_checks=1 \

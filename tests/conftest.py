@@ -3,6 +3,7 @@ scenes (skipped the same way everywhere when absent) and an independent numpy
 discretisation (G, volumes) that does not go through emu's C++ code."""
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,17 @@ import pytest
 
 import emu
 from emu.build.procedural import fusiform
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def repo_tool(name: str):
+    """The module tools/<name>.py (the repository's scripts are not a package)."""
+    spec = importlib.util.spec_from_file_location(f"{name}_tool", ROOT / "tools" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
 
 # the authors' research scenes, beside the repository (/work/shared/data)
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

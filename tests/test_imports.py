@@ -11,10 +11,10 @@ same layers (tools/layout.py writes it; test_layout.py keeps it current).
 from __future__ import annotations
 
 import ast
-import importlib.util
 from pathlib import Path
 
 import pytest
+from conftest import repo_tool
 
 PACKAGE = Path(__file__).resolve().parents[1] / "python" / "emu"
 
@@ -22,9 +22,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "python" / "emu"
 # what each may import in tools/layout.py (which draws docs/layout.md from them);
 # a module's layer is the folder it lives in. The facade is emu/__init__.py and
 # emu/__main__.py; the C++ core, emu._core, is the bottom.
-_spec = importlib.util.spec_from_file_location("layout_tool", PACKAGE.parents[1] / "tools" / "layout.py")
-_layout = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_layout)
+_layout = repo_tool("layout")
 LAYER_FOLDERS, MAY_IMPORT = _layout.LAYER_FOLDERS, _layout.MAY_IMPORT
 
 

@@ -5,21 +5,14 @@ from a clone: the page would still name it from a working tree, this test not);
 and no Python function is over tools/unit_sizes.py's limit."""
 from __future__ import annotations
 
-import importlib.util
 import re
 import subprocess
 from pathlib import Path
 
 import pytest
+from conftest import repo_tool
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def tool(name: str):
-    spec = importlib.util.spec_from_file_location(f"{name}_tool", ROOT / "tools" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def tracked(*paths) -> list:
@@ -42,13 +35,13 @@ def page_sections(page: str) -> dict:
 
 
 def test_the_layout_page_is_current():
-    assert (ROOT / "docs" / "layout.md").read_text() == tool("layout").page(), \
+    assert (ROOT / "docs" / "layout.md").read_text() == repo_tool("layout").page(), \
         "docs/layout.md is stale: run python tools/layout.py > docs/layout.md"
 
 
 def test_the_page_lists_every_tracked_module_and_header_under_its_folder():
     sections = page_sections((ROOT / "docs" / "layout.md").read_text())
-    layers = tool("layout").LAYER_FOLDERS
+    layers = repo_tool("layout").LAYER_FOLDERS
     for p in tracked("python/emu"):
         rel = p.relative_to("python/emu")
         if p.suffix == ".py" and len(rel.parts) == 2 and rel.parts[0] in layers and p.name != "__init__.py":
@@ -61,7 +54,7 @@ def test_the_page_lists_every_tracked_module_and_header_under_its_folder():
 
 
 def test_no_python_function_is_over_the_limit():
-    sizes = tool("unit_sizes")
+    sizes = repo_tool("unit_sizes")
     over = [f"{where}: {name} ({n} lines)" for kind, where, name, n in sizes.units()
             if kind == "function" and where.suffix == ".py" and n > sizes.LIMITS["function"]]
     assert not over, "split these functions (tools/unit_sizes.py):\n" + "\n".join(over)

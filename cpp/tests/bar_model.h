@@ -58,4 +58,11 @@ inline Model bar(int nx, int nz) {
   m.pinned = Eigen::Map<Eigen::VectorXi>(pins.data(), pins.size());
   return m;
 }
+
+// The bar's load: its one muscle at activation a.
+inline LoadCase bar_load(double a) {
+  LoadCase l;
+  l.activation = Eigen::VectorXd::Constant(1, a);
+  return l;
+}
 }  // namespace emu

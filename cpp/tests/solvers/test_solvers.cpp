@@ -14,18 +14,10 @@
 
 using namespace emu;
 
-namespace {
-LoadCase load(double a) {
-  LoadCase l;
-  l.activation = Eigen::VectorXd::Constant(1, a);
-  return l;
-}
-}  // namespace
-
 TEST(emu_and_fem_agree_as_alpha_grows) {
   const Model m = bar(2, 4);
   FemSolver fem(m, SolverOptions{});
-  const LoadCase l = load(3e4);
+  const LoadCase l = bar_load(3e4);
   const SolveResult rf = fem.solve(l);
   CHECK(rf.converged);
   double prev = 1e9;

@@ -159,7 +159,7 @@ class Scene:
     def attachments(self, muscle: str) -> dict:
         """{bone name: vertex ids} where the muscle shares vertices with a bone."""
         p = self._part(muscle, "muscle")
-        return attachments(self.tets, p.tets, self._bones())
+        return attachments(self.tets, p.tets, self.bone_tets())
 
     def tendon_attachments(self, muscle: str) -> dict:
         """{bone name: (tendon name, vertex ids)} where a tendon sharing
@@ -172,11 +172,11 @@ class Scene:
         for t in self.parts.values():
             if t.kind != "tendon" or not np.intersect1d(tet_vertices(self.tets[t.tets], len(self.points)), mine).size:
                 continue
-            for bone, ids in attachments(self.tets, t.tets, self._bones()).items():
+            for bone, ids in attachments(self.tets, t.tets, self.bone_tets()).items():
                 out.setdefault(bone, (t.name, ids))
         return out
 
-    def _bones(self) -> dict:
+    def bone_tets(self) -> dict:
         """{bone name: tet ids} in the scene's order."""
         return {p.name: p.tets for p in self.parts.values() if p.kind == "bone"}
 
@@ -201,7 +201,7 @@ class Scene:
         by two bones (one shared vertex is a ball joint at ``centre``, two or more
         on one line a hinge with ``axis`` through ``centre``, more not on a line a
         rigid weld), then the declared ones (add_joint)."""
-        return detect_joints(self.points, self.tets, self._bones()) + list(self.declared_joints)
+        return detect_joints(self.points, self.tets, self.bone_tets()) + list(self.declared_joints)
 
     def add_joint(self, bone: str, other: str, centre, axis=None):
         """Declare a joint between two bones that share no vertex there (meshes
@@ -209,7 +209,7 @@ class Scene:
         ``axis`` (3,) a hinge about the line through ``centre``. At least one of
         the bones must be movable (fixed=False); the other may be fixed or
         scripted. Returns the Joint."""
-        j = declare_joint(self._bones(), bone, other, centre, axis)
+        j = declare_joint(self.bone_tets(), bone, other, centre, axis)
         self.declared_joints.append(j)
         return j
 

@@ -13,11 +13,6 @@ from .joints import check_declared_joints, detect_joints
 __all__ = ["validate", "cracks", "loose_contacts"]
 
 
-def _bones(scene) -> dict:
-    """{bone name: tet ids} in the scene's order."""
-    return {p.name: p.tets for p in scene.parts.values() if p.kind == "bone"}
-
-
 def _parts_of_vertices(scene, ids) -> list:
     """Names of the parts (in the scene's order) holding any of the vertices ids."""
     mark = np.zeros(len(scene.points), bool)
@@ -51,7 +46,7 @@ def validate(scene):
     check_anchored(len(scene.points), scene.tets[soft], pins, links, anchors,
                    vertex_parts=lambda ids: _parts_of_vertices(scene, ids), bodies=bodies)
     if scene.declared_joints:   # a joint the mesh made beside a declared one
-        check_declared_joints(scene.points, scene.tets, detect_joints(scene.points, scene.tets, _bones(scene)),
+        check_declared_joints(scene.points, scene.tets, detect_joints(scene.points, scene.tets, scene.bone_tets()),
                               scene.declared_joints)
     check_movable_bones(scene.points, {n: tet_vertices(scene.tets[scene.parts[n].tets], len(scene.points))
                                       for n in scene.movable_bones}, pins)
@@ -80,7 +75,7 @@ def cracks(scene):
 def loose_contacts(scene):
     """[(soft part, bone, triangles, area)] of Scene.loose_contacts."""
     soft = {p.name: p.tets for p in scene.parts.values() if p.kind in ("muscle", "tendon")}
-    bones = _bones(scene)
+    bones = scene.bone_tets()
     if not soft or not bones:
         return []
     return _loose_contacts(scene.points, scene.tets, soft, bones, shared_ok=scene.mesh_report.coincident)

@@ -16,14 +16,6 @@
 
 using namespace emu;
 
-namespace {
-LoadCase load(double a) {
-  LoadCase l;
-  l.activation = Eigen::VectorXd::Constant(1, a);
-  return l;
-}
-}  // namespace
-
 
 // The joint spring E(R) = k/2 (3 - tr R) is linear in R: its Euclidean
 // Hessian is zero and its Riemannian Hessian is the curvature term alone.
@@ -163,7 +155,7 @@ TEST(emu_gradient_matches_energy) {
   EmuSolverOptions eo;
   eo.alpha = 1e3 * m.mu(0);
   EmuSolver emu(m, SolverOptions{}, eo);
-  const LoadCase l = load(3e4);
+  const LoadCase l = bar_load(3e4);
   std::mt19937 rng(9);
   std::normal_distribution<double> n(0, 0.05);
   Eigen::MatrixXd F(m.tets.rows(), 9);
@@ -189,7 +181,7 @@ TEST(emu_with_all_modes_inverts_the_exact_hessian) {
   eo.modes = 3 * d.num_free;  // every mode: the Woodbury inverse is exact
   eo.preconditioner = EmuPreconditioner::Woodbury;  // (the default, constant Schur, builds no modes)
   EmuSolver emu(m, SolverOptions{}, eo);
-  const LoadCase l = load(1e4);
+  const LoadCase l = bar_load(1e4);
   Eigen::MatrixXd F(m.tets.rows(), 9), R = Eigen::MatrixXd::Random(m.tets.rows(), 9);
   for (Eigen::Index t = 0; t < F.rows(); ++t) F.row(t) = Eigen::Map<const Eigen::Matrix<double, 1, 9>>(Mat3::Identity().eval().data());
   const Eigen::MatrixXd Y = EmuSolverTesting::woodbury_solve(emu, l, F, R);
@@ -199,7 +191,7 @@ TEST(emu_with_all_modes_inverts_the_exact_hessian) {
 
 TEST(emu_single_precision_preconditioner_changes_cg_not_the_answer) {
   const Model m = bar(3, 16);
-  const LoadCase l = load(3e4);
+  const LoadCase l = bar_load(3e4);
   const double diag = (m.rest.colwise().maxCoeff() - m.rest.colwise().minCoeff()).norm();
   SolveResult r[2];
   for (int single : {0, 1}) {
@@ -344,9 +336,9 @@ TEST(bone_turns_at_once_match_one_at_a_time) {
     for (bool exact : {false, true}) {
       std::array<Eigen::Matrix3d, 3> M;
       for (int k = 0; k < 3; ++k) M[k] = Eigen::Matrix3d::Random();
-      const auto three = EmuSolverTesting::bone_turns(emu, load(0.3), F, b, M, exact);
+      const auto three = EmuSolverTesting::bone_turns(emu, bar_load(0.3), F, b, M, exact);
       for (int k = 0; k < 3; ++k) {
-        const auto one = EmuSolverTesting::bone_turn(emu, load(0.3), F, b, M[k], exact);
+        const auto one = EmuSolverTesting::bone_turn(emu, bar_load(0.3), F, b, M[k], exact);
         CHECK(three[k].first == one.first && three[k].second == one.second);
         CHECK(one.second.norm() > 0);
       }

@@ -8,18 +8,10 @@
 
 using namespace emu;
 
-namespace {
-LoadCase load(double a) {
-  LoadCase l;
-  l.activation = Eigen::VectorXd::Constant(1, a);
-  return l;
-}
-}  // namespace
-
 TEST(fem_gradient_matches_energy_and_solve_converges) {
   const Model m = bar(2, 5);
   FemSolver fem(m, SolverOptions{});
-  const LoadCase l = load(3e4);
+  const LoadCase l = bar_load(3e4);
   std::mt19937 rng(5);
   std::normal_distribution<double> n(0, 0.02);
   Eigen::MatrixX3d x = m.rest;
