@@ -38,22 +38,37 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
     Z[3 * nb + e] = extra[e];
     product(Z[3 * nb + e], HZ[3 * nb + e]);
   }
-  Eigen::MatrixXd E(nz, nz);
-  for (int j = 0; j < nz; ++j)
-    for (int i = 0; i < nz; ++i) E(i, j) = dot(Z[i], HZ[j]);
-  const Eigen::Index entries = 9 * static_cast<Eigen::Index>(nu);
-  HZ_.resize(entries, nz);
-  for (int j = 0; j < nz; ++j) HZ_.col(j) = flat(HZ[j]);
-  Zx_.resize(entries, nz - 3 * nb);  // the recycled directions; the turns are M_bk Phi_b
-  for (int j = 3 * nb; j < nz; ++j) Zx_.col(j - 3 * nb) = flat(Z[j]);
   // In the coarse coordinates: the bones' turns (or the turn map's
-  // combinations of them) and the recycled directions, Zc = Z Tc.
+  // combinations of them) and the recycled directions, Zc = Z Tc. H Zc is
+  // kept (an application streams nc columns, not nz); E = Z^T H Z and H Zc
+  // come from one pass over the entries, chunk by chunk (each chunk's rows of
+  // Z and H Z gathered once, then small products): the same bits for any
+  // number of threads.
   const int nt = turn_map ? static_cast<int>(turn_map->cols()) : 3 * nb, nc = nt + nz - 3 * nb;
-  Eigen::MatrixXd Tc = Eigen::MatrixXd::Zero(nz, nc);
-  if (turn_map) Tc.topLeftCorner(3 * nb, nt) = *turn_map;
-  else Tc.topLeftCorner(3 * nb, nt).setIdentity();
-  Tc.bottomRightCorner(nz - 3 * nb, nc - nt).setIdentity();
-  const Eigen::MatrixXd Ec = turn_map ? Eigen::MatrixXd(Tc.transpose() * E * Tc) : E;
+  Tc_ = Eigen::MatrixXd::Zero(nz, nc);
+  if (turn_map) Tc_.topLeftCorner(3 * nb, nt) = *turn_map;
+  else Tc_.topLeftCorner(3 * nb, nt).setIdentity();
+  Tc_.bottomRightCorner(nz - 3 * nb, nc - nt).setIdentity();
+  const Eigen::Index entries = 9 * static_cast<Eigen::Index>(nu);
+  HZ_.resize(entries, nc);
+  Zx_.resize(entries, nz - 3 * nb);  // the recycled directions; the turns are M_bk Phi_b
+  Eigen::VectorXd e;
+  Eigen::MatrixXd parts;
+  chunked_sum_into(
+      entries, static_cast<Eigen::Index>(nz) * nz,
+      [&](Eigen::Index lo, Eigen::Index hi, auto& part) {
+        const Eigen::Index n = hi - lo;
+        Eigen::MatrixXd Zr(n, nz), HZr(n, nz);
+        for (int i = 0; i < nz; ++i) {
+          Zr.col(i) = flat(Z[i]).segment(lo, n);
+          HZr.col(i) = flat(HZ[i]).segment(lo, n);
+        }
+        Eigen::Map<Eigen::MatrixXd>(part.data(), nz, nz).noalias() = Zr.transpose() * HZr;
+        HZ_.middleRows(lo, n).noalias() = HZr * Tc_;
+        Zx_.middleRows(lo, n) = Zr.rightCols(nz - 3 * nb);
+      },
+      parts, e);
+  const Eigen::MatrixXd Ec = Tc_.transpose() * Eigen::Map<const Eigen::MatrixXd>(e.data(), nz, nz) * Tc_;
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (Ec + Ec.transpose()));
   double scale = std::numeric_limits<double>::infinity();
   for (int u = layout_.num_soft; u < nu; ++u) {
@@ -62,25 +77,24 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
       vol += layout_.geometry.volume(layout_.unknown_tets[i]);
     scale = std::min(scale, 2.0 * alpha_ * vol);
   }
-  Eigen::MatrixXd inv = Eigen::MatrixXd::Zero(nc, nc);
+  inv_ = Eigen::MatrixXd::Zero(nc, nc);
   neutral_.clear();
   balancing_ = true;
   for (int i = 0; i < nc; ++i) {
     const Eigen::VectorXd vc = es.eigenvectors().col(i);
     if (es.eigenvalues()(i) > 1e-9 * scale) {
-      inv += vc * vc.transpose() / es.eigenvalues()(i);
+      inv_ += vc * vc.transpose() / es.eigenvalues()(i);
       continue;
     }
     balancing_ = false;
     if (es.eigenvalues()(i) < -1e-9 * scale) continue;  // negative curvature: not a neutral mode
-    const Eigen::VectorXd v = turn_map ? Eigen::VectorXd(Tc * vc) : vc;  // as the bones' world turns
+    const Eigen::VectorXd v = Tc_ * vc;  // as the bones' world turns
     if (v.head(3 * nb).norm() < 0.5 * v.norm()) continue;  // mostly a recycled direction: not a bone's mode
     int best = 0;
     for (int b = 1; b < nb; ++b)
       if (v.segment<3>(3 * b).norm() > v.segment<3>(3 * best).norm()) best = b;
     neutral_.push_back({best, v.segment<3>(3 * best).normalized()});
   }
-  inv_ = turn_map ? Eigen::MatrixXd(Tc * inv * Tc.transpose()) : inv;
   built_ = true;
 }
 

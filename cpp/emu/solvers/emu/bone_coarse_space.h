@@ -90,17 +90,18 @@ class BoneCoarseSpace {
   double alpha_;
   std::vector<const Mat9X*> follow_;  // Phi_b on the soft unknowns, per bone
   std::vector<Mat3> turn_;            // M_bk, column 3 b + k of Z
-  // H Z, one column per coarse direction (vec of its 9 x #unknowns array),
+  // H Zc, one column per coarse coordinate (vec of its 9 x #unknowns array),
   // and the recycled directions' columns of Z (after the 3 #bones turns): an
   // application streams each once per use, not once per column.
   Eigen::MatrixXd HZ_, Zx_;
-  Eigen::MatrixXd inv_;  // pseudo-inverse of Z^T H Z
+  Eigen::MatrixXd Tc_;   // nz x nc: Z's directions -> the coarse coordinates (Zc = Z Tc)
+  Eigen::MatrixXd inv_;  // pseudo-inverse of Zc^T H Zc (nc x nc)
   bool built_ = false, balancing_ = false;
   std::vector<NeutralMode> neutral_;
   mutable Mat9X r1_;
   mutable Eigen::MatrixXd parts_;    // nz by kSumChunks partial projections (H Z)
   mutable Eigen::MatrixXd parts_z_;  // the same for Z's (9 #bones + recycled rows): no resize per use
-  mutable Eigen::VectorXd c1_, c2_;
+  mutable Eigen::VectorXd c1_, c2_, cz_;
   mutable std::vector<Mat3> combined_;  // sum_k c_bk M_bk per bone (combine_Z)
 };
 
@@ -110,20 +111,25 @@ void BoneCoarseSpace::apply(const Mat9X& in, Mat9X& out, Base&& base) const {
     base(in, out);
     return;
   }
+  // in the coarse coordinates (Zc = Z Tc); Z's own coefficients for combine_Z
   if (balancing_) {
-    project_Z(in, c2_);
-    c1_.noalias() = inv_ * c2_;  // c1 = (Z^T H Z)^-1 Z^T r
-    combine(in, -1.0, HZ_, c1_, r1_);  // r1 = r - H Z c1
+    project_Z(in, cz_);
+    c2_.noalias() = Tc_.transpose() * cz_;
+    c1_.noalias() = inv_ * c2_;        // c1 = (Zc^T H Zc)^-1 Zc^T r
+    combine(in, -1.0, HZ_, c1_, r1_);                // r1 = r - H Zc c1
     base(r1_, out);
     project(HZ_, out, c2_);
-    c1_.noalias() -= inv_ * c2_;  // c1 - c2, c2 = (Z^T H Z)^-1 (H Z)^T B r1
-    combine_Z(out, 1.0, c1_, out);
+    c1_.noalias() -= inv_ * c2_;  // c1 - c2, c2 = (Zc^T H Zc)^-1 (H Zc)^T B r1
+    cz_.noalias() = Tc_ * c1_;
+    combine_Z(out, 1.0, cz_, out);
     return;
   }
   base(in, out);
-  project_Z(in, c2_);
+  project_Z(in, cz_);
+  c2_.noalias() = Tc_.transpose() * cz_;
   c1_.noalias() = inv_ * c2_;
-  combine_Z(out, 1.0, c1_, out);
+  cz_.noalias() = Tc_ * c1_;
+  combine_Z(out, 1.0, cz_, out);
 }
 
 }  // namespace emu
