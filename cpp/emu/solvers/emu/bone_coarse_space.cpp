@@ -14,19 +14,14 @@ BoneCoarseSpace::BoneCoarseSpace(const UnknownLayout& layout, double alpha, std:
 
 void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& product,
                             const std::vector<Mat9X>& extra, const Eigen::MatrixXd* turn_map) {
-  const int nb = layout_.num_bones, nu = layout_.num_unknowns, nz = 3 * nb + static_cast<int>(extra.size());
+  const int nb = layout_.num_bones, nz = 3 * nb + static_cast<int>(extra.size());
   if (static_cast<int>(follow_.size()) != nb)
     throw std::logic_error("BoneCoarseSpace: one follow field per movable bone expected");
   std::vector<Mat9X> Z(nz), HZ(nz);
   turn_.resize(3 * nb);
   for (int b = 0; b < nb; ++b) {
     std::array<Mat3, 3> M;
-    for (int k = 0; k < 3; ++k) {
-      Mat3 W = Mat3::Zero();  // [e_k]_x
-      W((k + 2) % 3, (k + 1) % 3) = 1.0;
-      W((k + 1) % 3, (k + 2) % 3) = -1.0;
-      M[k] = turn_[3 * b + k] = W * unflatten(F.col(layout_.num_soft + b));
-    }
+    for (int k = 0; k < 3; ++k) M[k] = turn_[3 * b + k] = cross_matrix(Vec3::Unit(k)) * unflatten(F.col(layout_.num_soft + b));
     std::array<Mat9X, 3> Zb, HZb;
     turn(b, M, Zb, HZb);
     for (int k = 0; k < 3; ++k) {
@@ -38,20 +33,26 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
     Z[3 * nb + e] = extra[e];
     product(Z[3 * nb + e], HZ[3 * nb + e]);
   }
-  // In the coarse coordinates: the bones' turns (or the turn map's
-  // combinations of them) and the recycled directions, Zc = Z Tc. H Zc is
-  // kept (an application streams nc columns, not nz); E = Z^T H Z and H Zc
-  // come from one pass over the entries, chunk by chunk (each chunk's rows of
-  // Z and H Z gathered once, then small products): the same bits for any
-  // number of threads.
+  // the coarse coordinates: the bones' turns (or the turn map's combinations
+  // of them), then the extra directions, Zc = Z Tc
   const int nt = turn_map ? static_cast<int>(turn_map->cols()) : 3 * nb, nc = nt + nz - 3 * nb;
   Tc_ = Eigen::MatrixXd::Zero(nz, nc);
   if (turn_map) Tc_.topLeftCorner(3 * nb, nt) = *turn_map;
   else Tc_.topLeftCorner(3 * nb, nt).setIdentity();
   Tc_.bottomRightCorner(nz - 3 * nb, nc - nt).setIdentity();
-  const Eigen::Index entries = 9 * static_cast<Eigen::Index>(nu);
-  HZ_.resize(entries, nc);
-  Zx_.resize(entries, nz - 3 * nb);  // the recycled directions; the turns are M_bk Phi_b
+  invert_coarse_matrix(coarse_products(Z, HZ));
+  built_ = true;
+}
+
+// H Zc is kept (an application streams nc columns, not nz); E = Z^T H Z and
+// H Zc come from one pass over the entries, chunk by chunk (each chunk's rows
+// of Z and H Z gathered once, then small products): the same bits for any
+// number of threads. Returns Ec = Zc^T H Zc.
+Eigen::MatrixXd BoneCoarseSpace::coarse_products(const std::vector<Mat9X>& Z, const std::vector<Mat9X>& HZ) {
+  const int nz = static_cast<int>(Z.size()), nx = nz - 3 * layout_.num_bones;
+  const Eigen::Index entries = 9 * static_cast<Eigen::Index>(layout_.num_unknowns);
+  HZ_.resize(entries, Tc_.cols());
+  Zx_.resize(entries, nx);  // the extra directions; the turns are M_bk Phi_b
   Eigen::VectorXd e;
   Eigen::MatrixXd parts;
   chunked_sum_into(
@@ -65,10 +66,18 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
         }
         Eigen::Map<Eigen::MatrixXd>(part.data(), nz, nz).noalias() = Zr.transpose() * HZr;
         HZ_.middleRows(lo, n).noalias() = HZr * Tc_;
-        Zx_.middleRows(lo, n) = Zr.rightCols(nz - 3 * nb);
+        Zx_.middleRows(lo, n) = Zr.rightCols(nx);
       },
       parts, e);
-  const Eigen::MatrixXd Ec = Tc_.transpose() * Eigen::Map<const Eigen::MatrixXd>(e.data(), nz, nz) * Tc_;
+  return Tc_.transpose() * Eigen::Map<const Eigen::MatrixXd>(e.data(), nz, nz) * Tc_;
+}
+
+// inv_: the pseudo-inverse of Ec's positive part. A direction of zero
+// curvature, against the curvature 2 alpha sum_t V_t of turning the smallest
+// bone's volume against an ACAP term of weight 1, is a neutral mode (reported
+// by bone and axis); any eigenvalue not clearly positive makes the form additive.
+void BoneCoarseSpace::invert_coarse_matrix(const Eigen::MatrixXd& Ec) {
+  const int nb = layout_.num_bones, nu = layout_.num_unknowns, nc = static_cast<int>(Ec.rows());
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (Ec + Ec.transpose()));
   double scale = std::numeric_limits<double>::infinity();
   for (int u = layout_.num_soft; u < nu; ++u) {
@@ -95,7 +104,6 @@ void BoneCoarseSpace::build(const Mat9X& F, const Turn& turn, const Product& pro
       if (v.segment<3>(3 * b).norm() > v.segment<3>(3 * best).norm()) best = b;
     neutral_.push_back({best, v.segment<3>(3 * best).normalized()});
   }
-  built_ = true;
 }
 
 void BoneCoarseSpace::project(const Eigen::MatrixXd& M, const Mat9X& v, Eigen::VectorXd& c) const {

@@ -78,6 +78,11 @@ class BoneCoarseSpace {
   /// c = M^T v (M: #entries by nz), per fixed chunk of rows then over the
   /// chunks in order: the same bits for any number of threads.
   void project(const Eigen::MatrixXd& M, const Mat9X& v, Eigen::VectorXd& c) const;
+  /// H Zc (kept) and the extra directions' columns from Z, H Z (nz each,
+  /// 9 x #unknowns); returns Zc^T H Zc.
+  Eigen::MatrixXd coarse_products(const std::vector<Mat9X>& Z, const std::vector<Mat9X>& HZ);
+  /// inv_, the neutral modes and the form (balancing or additive) from Zc^T H Zc.
+  void invert_coarse_matrix(const Eigen::MatrixXd& Ec);
   /// out = a + s M c over the entries (a may be out), in parallel.
   static void combine(const Mat9X& a, double s, const Eigen::MatrixXd& M, const Eigen::VectorXd& c, Mat9X& out);
   /// c = Z^T v from the turns' shared fields and the recycled columns

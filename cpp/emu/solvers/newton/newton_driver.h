@@ -25,6 +25,7 @@
 #include "emu/solvers/newton/convergence.h"
 #include "emu/solvers/newton/line_search.h"
 #include "emu/solvers/newton/result.h"
+#include "emu/solvers/newton/step_test.h"
 #include "emu/solvers/newton/stopwatch.h"
 #include "emu/solvers/solver_options.h"
 
@@ -50,6 +51,47 @@ struct SearchDirection {
 /// The gradient's round-off is measured at the iterates in the endgame:
 /// |g| <= max(kNoiseFrom |g_0|, kNoiseBand rtol_grad |g_0|).
 constexpr double kNoiseFrom = 1e-3, kNoiseBand = 100.0;
+
+/// The line search along d from the problem's iterate (energy E): Armijo
+/// backtracking, or where no step lowers the energy the full step when the
+/// energy is unchanged to round-off and the gradient falls. False: no step;
+/// res.status says why (a stall, or the gradient at its round-off: converged).
+template <class Problem>
+bool line_search_along(Problem& p, const SearchDirection& d, double E, double E0, const SolverOptions& o,
+                       LineSearchResult& ls, SolveResult& res) {
+  {
+    ScopedSeconds timer(res.phases.line_search);
+    ls = armijo_backtracking([&](double s) { return p.trial_energy(s); }, E, d.slope, o);
+  }
+  if (ls.success) return true;
+  const double E1 = p.trial_energy(1.0);
+  if (accept_at_roundoff(E1, p.trial_grad_norm(), E, p.grad_norm(), E0)) {
+    ls.success = true;
+    ls.step = 1.0;
+    ls.energy = E1;
+    return true;
+  }
+  // a warm start whose |g_0| is near the round-off never enters the
+  // endgame band: its stall is measured here
+  if (o.noise_factor > 0 && p.grad_norm() <= o.noise_factor * p.gradient_noise()) {
+    res.converged = true;
+    res.status = "converged: the gradient is at its round-off level";
+    return false;
+  }
+  res.status = "stalled: no step along the search direction decreases the energy or the gradient "
+               "(round-off level reached; loosen rtol_grad / rtol_energy)";
+  return false;
+}
+
+/// The direction's counters into the result; false (res.status its failure) where it failed.
+inline bool count_direction(const SearchDirection& d, SolveResult& res) {
+  res.filtered_steps += d.filtered;
+  res.exact_attempts_failed += d.exact_failed;
+  res.factorizations += d.factorizations;
+  res.negative_curvature_steps += d.negative_curvature;
+  if (!d.ok) res.status = d.failure;
+  return d.ok;
+}
 
 /// Minimises the problem from its current iterate; fills every field of res
 /// but positions, F and the neutral modes (the problem's own output).
@@ -86,45 +128,15 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
   }
   bool stopped = stop_requested();
   Eigen::MatrixX3d x_prev;  // for the step_tol test
-  double step_before = -1.0;     // the last step's largest vertex move (-1: none yet)
-  bool contracted_before = false;  // the last step was exact and at most step_tol_contraction of its own before
+  StepTest step_test;
   for (int it = 1; !res.converged && !stopped && it <= o.max_iterations; ++it) {
     if (o.interrupted && o.interrupted()) {
       res.status = "interrupted";
       break;
     }
     const SearchDirection d = p.direction(it, res.phases);
-    res.filtered_steps += d.filtered;
-    res.exact_attempts_failed += d.exact_failed;
-    res.factorizations += d.factorizations;
-    res.negative_curvature_steps += d.negative_curvature;
-    if (!d.ok) {
-      res.status = d.failure;
-      break;
-    }
     LineSearchResult ls;
-    {
-      ScopedSeconds timer(res.phases.line_search);
-      ls = armijo_backtracking([&](double s) { return p.trial_energy(s); }, E, d.slope, o);
-    }
-    if (!ls.success) {
-      const double E1 = p.trial_energy(1.0);
-      if (!accept_at_roundoff(E1, p.trial_grad_norm(), E, p.grad_norm(), conv.E0)) {
-        // a warm start whose |g_0| is near the round-off never enters the
-        // endgame band: its stall is measured here
-        if (o.noise_factor > 0 && p.grad_norm() <= o.noise_factor * p.gradient_noise()) {
-          res.converged = true;
-          res.status = "converged: the gradient is at its round-off level";
-          break;
-        }
-        res.status = "stalled: no step along the search direction decreases the energy or the gradient "
-                     "(round-off level reached; loosen rtol_grad / rtol_energy)";
-        break;
-      }
-      ls.success = true;
-      ls.step = 1.0;
-      ls.energy = E1;
-    }
+    if (!count_direction(d, res) || !line_search_along(p, d, E, conv.E0, o, ls, res)) break;
     const double E_prev = E;
     if (o.step_tol > 0) x_prev = p.positions();
     {
@@ -144,20 +156,11 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
     if (conv.test(E_prev, E, gn)) {
       res.converged = true;
       res.status = gn > tol ? "converged: the gradient is at its round-off level" : "converged";
-    } else if (o.step_tol > 0) {
-      // A full Newton step this short: the remaining distance is about as
-      // short where Newton converges at least linearly at rate <= 1/2
-      // (assumed, or seen with step_tol_contraction: two steps in a row of
-      // the exact Hessian, each at most that fraction of the one before).
-      const double step = (p.positions() - x_prev).rowwise().norm().maxCoeff();
-      const bool contracts = d.filtered == 0 && step_before >= 0 && step <= o.step_tol_contraction * step_before;
-      const bool seen = o.step_tol_contraction <= 0 || (contracts && contracted_before);
-      if (ls.step == 1.0 && gn <= o.step_tol_grad * std::max(conv.g0, cold_g0) && step <= o.step_tol && seen) {
-        res.converged = true;
-        res.status = "converged: a full step moved no vertex by more than step_tol";
-      }
-      step_before = step;
-      contracted_before = contracts;
+    } else if (o.step_tol > 0 &&
+               step_test.passes(o, d.filtered == 0, (p.positions() - x_prev).rowwise().norm().maxCoeff(),
+                                ls.step == 1.0, gn, std::max(conv.g0, cold_g0))) {
+      res.converged = true;
+      res.status = "converged: a full step moved no vertex by more than step_tol";
     }
     stopped = stop_requested();
   }

@@ -14,6 +14,7 @@
 #include "emu/solvers/newton/lbfgs.h"
 #include "emu/solvers/newton/pcg.h"
 #include "emu/solvers/newton/rounding_perturbation.h"
+#include "emu/solvers/newton/step_test.h"
 
 using namespace emu;
 
@@ -227,6 +228,40 @@ TEST(newton_driver_step_tolerance_sees_the_contraction) {
   newton_minimize(c, o, 1e-14, Clock::now(), rc);
   CHECK(rc.converged && rc.status.find("step_tol") != std::string::npos && rc.iterations < rs.iterations);
   CHECK((c.x - strict.x).cwiseAbs().maxCoeff() <= 0.05);
+}
+
+TEST(step_test_needs_a_short_full_step_near_equilibrium_and_two_exact_contractions) {
+  SolverOptions o;
+  o.step_tol = 1e-3;
+  o.step_tol_grad = 1e-2;
+  {  // the rate assumed: one short full step near equilibrium stops
+    StepTest t;
+    CHECK(!t.passes(o, true, 2e-3, true, 1.0, 1000.0));    // too long
+    CHECK(!t.passes(o, true, 5e-4, false, 1.0, 1000.0));   // a cut step
+    CHECK(!t.passes(o, true, 5e-4, true, 20.0, 1000.0));   // |g| above the gate
+    CHECK(t.passes(o, false, 5e-4, true, 1.0, 1000.0));    // filtered steps count when the rate is assumed
+  }
+  o.step_tol_contraction = 0.5;
+  {  // the rate seen: two exact steps in a row, each at most half the one before
+    StepTest t;
+    CHECK(!t.passes(o, true, 4e-3, true, 1.0, 1000.0));
+    CHECK(!t.passes(o, true, 8e-4, true, 1.0, 1000.0));    // one contraction: not yet
+    CHECK(t.passes(o, true, 3e-4, true, 1.0, 1000.0));     // the second
+  }
+  {
+    StepTest t;
+    CHECK(!t.passes(o, true, 4e-3, true, 1.0, 1000.0));
+    CHECK(!t.passes(o, false, 8e-4, true, 1.0, 1000.0));   // a filtered step breaks the run
+    CHECK(!t.passes(o, true, 3e-4, true, 1.0, 1000.0));
+    CHECK(t.passes(o, true, 1e-4, true, 1.0, 1000.0));
+  }
+  {
+    StepTest t;
+    CHECK(!t.passes(o, true, 8e-4, true, 1.0, 1000.0));
+    CHECK(!t.passes(o, true, 7e-4, true, 1.0, 1000.0));    // 0.875 of the one before
+    CHECK(!t.passes(o, true, 3e-4, true, 1.0, 1000.0));
+    CHECK(t.passes(o, true, 1e-4, true, 1.0, 1000.0));
+  }
 }
 
 TEST(newton_driver_stalls_when_no_step_helps) {
