@@ -10,6 +10,16 @@ BlockPattern::BlockPattern(const Eigen::MatrixX4i& T, const Eigen::VectorXi& fre
                            int num_free, int block_size)
     : bs_(block_size), num_free_(num_free) {
   if (bs_ != 1 && bs_ != 3) throw std::invalid_argument("BlockPattern: block size must be 1 or 3");
+  std::vector<int> blk_vi, blk_vj;
+  find_blocks(T, free_index, blk_vi, blk_vj);
+  lay_out_columns(blk_vi, blk_vj);
+  find_incidence(T, free_index);
+}
+
+// The stored vertex blocks (vi <= vj) sorted by (vj, vi), and each block's
+// contributions (tet, corner pair) in (tet, corner) order.
+void BlockPattern::find_blocks(const Eigen::MatrixX4i& T, const Eigen::VectorXi& free_index, std::vector<int>& blk_vi,
+                               std::vector<int>& blk_vj) {
   const Eigen::Index m = T.rows();
   struct Entry {
     int vi, vj, t, ab;
@@ -38,8 +48,6 @@ BlockPattern::BlockPattern(const Eigen::MatrixX4i& T, const Eigen::VectorXi& fre
   };
   stable_sort_by(&Entry::vi);
   stable_sort_by(&Entry::vj);
-  // Unique blocks.
-  std::vector<int> blk_vi, blk_vj;
   contrib_ptr_.push_back(0);
   for (size_t e = 0; e < entries.size(); ++e) {
     if (e == 0 || entries[e].vi != entries[e - 1].vi || entries[e].vj != entries[e - 1].vj) {
@@ -52,6 +60,11 @@ BlockPattern::BlockPattern(const Eigen::MatrixX4i& T, const Eigen::VectorXi& fre
   }
   contrib_ptr_.push_back(static_cast<int>(entries.size()));
   if (entries.empty()) contrib_ptr_.assign(1, 0);
+}
+
+// The compressed columns of the blocks' upper triangle and each block's
+// position in them.
+void BlockPattern::lay_out_columns(const std::vector<int>& blk_vi, const std::vector<int>& blk_vj) {
   const size_t nblk = blk_vi.size();
   // Column counts: block (vi < vj) adds bs rows to each of its bs columns;
   // a diagonal block adds c + 1 rows to its column c.
@@ -81,7 +94,11 @@ BlockPattern::BlockPattern(const Eigen::MatrixX4i& T, const Eigen::VectorXi& fre
       for (int r = 0; r < nr; ++r) row_index_[fill[col]++] = blk_vi[k] * bs_ + r;
     }
   }
-  // Corner incidence for gathers.
+}
+
+// Per free vertex, its tet corners (t * 4 + a) in tet order: gather's sums.
+void BlockPattern::find_incidence(const Eigen::MatrixX4i& T, const Eigen::VectorXi& free_index) {
+  const Eigen::Index m = T.rows();
   std::vector<int> deg(num_free_ + 1, 0);
   for (Eigen::Index t = 0; t < m; ++t)
     for (int a = 0; a < 4; ++a)

@@ -38,6 +38,11 @@ class BlockPattern {
   void gather(const double* corner, int width, double* out) const;
 
  private:
+  void find_blocks(const Eigen::MatrixX4i& T, const Eigen::VectorXi& free_index, std::vector<int>& blk_vi,
+                   std::vector<int>& blk_vj);
+  void lay_out_columns(const std::vector<int>& blk_vi, const std::vector<int>& blk_vj);
+  void find_incidence(const Eigen::MatrixX4i& T, const Eigen::VectorXi& free_index);
+
   int bs_, num_free_;
   std::vector<int> col_ptr_, row_index_;
   // Stored vertex blocks (row vertex <= column vertex): position in values of

@@ -36,6 +36,42 @@ struct Grid {
   }
 };
 
+// The grid over the triangles' boxes grown by max_distance, and (cell key,
+// triangle) for every cell a box touches, sorted by key; top: the grid's far corner.
+// Cell size: the median triangle extent (at least twice the search distance),
+// so a triangle spans few cells and a cell holds few triangles.
+Grid bin_triangles(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, double max_distance, Eigen::Vector3d& top,
+                   std::vector<std::pair<std::int64_t, int>>& cell_tri) {
+  const Eigen::Index nf = F.rows();
+  Eigen::MatrixX3d lo(nf, 3), hi(nf, 3);
+  std::vector<double> extent(nf);
+  for (Eigen::Index f = 0; f < nf; ++f) {
+    const Eigen::Vector3d a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
+    lo.row(f) = a.cwiseMin(b).cwiseMin(c).array() - max_distance;
+    hi.row(f) = a.cwiseMax(b).cwiseMax(c).array() + max_distance;
+    extent[f] = (hi.row(f) - lo.row(f)).maxCoeff();
+  }
+  std::nth_element(extent.begin(), extent.begin() + nf / 2, extent.end());
+  Grid grid;
+  grid.origin = lo.colwise().minCoeff().transpose();
+  top = hi.colwise().maxCoeff().transpose();
+  grid.h = std::max(extent[nf / 2], 2.0 * max_distance);
+  // at most ~64 cells per triangle on average: a coarser grid for very uneven surfaces
+  const Eigen::Array3d span = (top - grid.origin).array();
+  while ((span / grid.h).ceil().prod() > 64.0 * double(nf) + 1.0) grid.h *= 2.0;
+  grid.dims = (span / grid.h).ceil().cast<int>().max(1);
+  cell_tri.clear();
+  cell_tri.reserve(static_cast<std::size_t>(nf) * 2);
+  for (Eigen::Index f = 0; f < nf; ++f) {
+    const Eigen::Array3i c0 = grid.cell(lo.row(f).transpose()), c1 = grid.cell(hi.row(f).transpose());
+    for (int z = c0[2]; z <= c1[2]; ++z)
+      for (int y = c0[1]; y <= c1[1]; ++y)
+        for (int x = c0[0]; x <= c1[0]; ++x) cell_tri.emplace_back(grid.key({x, y, z}), int(f));
+  }
+  std::sort(cell_tri.begin(), cell_tri.end());
+  return grid;
+}
+
 }  // namespace
 
 Eigen::Vector3d closest_point_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
@@ -84,35 +120,9 @@ void near_surface(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Ei
   nearest = Eigen::VectorXi::Constant(nq, -1);
   if (nf == 0 || nq == 0) return;
 
-  // Cell size: the median triangle extent (at least the search distance), so a
-  // triangle spans few cells and a cell holds few triangles.
-  Eigen::MatrixX3d lo(nf, 3), hi(nf, 3);
-  std::vector<double> extent(nf);
-  for (Eigen::Index f = 0; f < nf; ++f) {
-    const Eigen::Vector3d a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
-    lo.row(f) = a.cwiseMin(b).cwiseMin(c).array() - max_distance;
-    hi.row(f) = a.cwiseMax(b).cwiseMax(c).array() + max_distance;
-    extent[f] = (hi.row(f) - lo.row(f)).maxCoeff();
-  }
-  std::nth_element(extent.begin(), extent.begin() + nf / 2, extent.end());
-  Grid grid;
-  grid.origin = lo.colwise().minCoeff().transpose();
-  const Eigen::Vector3d top = hi.colwise().maxCoeff().transpose();
-  grid.h = std::max(extent[nf / 2], 2.0 * max_distance);
-  // at most ~64 cells per triangle on average: a coarser grid for very uneven surfaces
-  const Eigen::Array3d span = (top - grid.origin).array();
-  while ((span / grid.h).ceil().prod() > 64.0 * double(nf) + 1.0) grid.h *= 2.0;
-  grid.dims = (span / grid.h).ceil().cast<int>().max(1);
-
-  std::vector<std::pair<std::int64_t, int>> cell_tri;   // (cell key, triangle), sorted by key
-  cell_tri.reserve(static_cast<std::size_t>(nf) * 2);
-  for (Eigen::Index f = 0; f < nf; ++f) {
-    const Eigen::Array3i c0 = grid.cell(lo.row(f).transpose()), c1 = grid.cell(hi.row(f).transpose());
-    for (int z = c0[2]; z <= c1[2]; ++z)
-      for (int y = c0[1]; y <= c1[1]; ++y)
-        for (int x = c0[0]; x <= c1[0]; ++x) cell_tri.emplace_back(grid.key({x, y, z}), int(f));
-  }
-  std::sort(cell_tri.begin(), cell_tri.end());
+  Eigen::Vector3d top;
+  std::vector<std::pair<std::int64_t, int>> cell_tri;
+  const Grid grid = bin_triangles(V, F, max_distance, top, cell_tri);
 
 #pragma omp parallel for schedule(static)
   for (Eigen::Index q = 0; q < nq; ++q) {

@@ -13,88 +13,108 @@ template <class M>
 void check_finite(const M& a, const char* what) {
   if (!a.allFinite()) fail(std::string(what) + " contains NaN or infinite values");
 }
-}  // namespace
 
-void Model::validate() const {
-  const Eigen::Index n = rest.rows(), m = tets.rows();
-  if (n == 0 || m == 0) fail("the model has no vertices or no tets");
-  check_finite(rest, "rest positions");
-  if (tets.minCoeff() < 0 || tets.maxCoeff() >= n) {
+void need_per_tet(const Model& md, Eigen::Index rows, const char* what) {
+  if (rows != md.tets.rows()) {
     std::ostringstream s;
-    s << "tet indices must lie in [0, " << n << "); got range [" << tets.minCoeff() << ", "
-      << tets.maxCoeff() << "]";
+    s << what << " has " << rows << " entries, expected one per tet (" << md.tets.rows() << ")";
     fail(s.str());
   }
-  auto need = [&](Eigen::Index rows, const char* what) {
-    if (rows != m) {
-      std::ostringstream s;
-      s << what << " has " << rows << " entries, expected one per tet (" << m << ")";
-      fail(s.str());
-    }
-  };
-  need(mu.size(), "mu");
-  need(lambda.size(), "lambda");
-  need(density.size(), "density");
-  need(acap_weight.size(), "acap_weight");
-  need(fiber.rows(), "fiber");
-  need(muscle.size(), "muscle");
-  check_finite(mu, "mu");
-  check_finite(lambda, "lambda");
-  check_finite(fiber, "fiber");
-  check_finite(density, "density");
-  check_finite(acap_weight, "acap_weight");
-  if ((mu.array() <= 0).any() || (lambda.array() <= 0).any())
+}
+}  // namespace
+
+namespace {
+// #V rest positions, tet indices in range, one material entry per tet.
+void check_mesh_and_materials(const Model& md) {
+  const Eigen::Index n = md.rest.rows(), m = md.tets.rows();
+  if (n == 0 || m == 0) fail("the model has no vertices or no tets");
+  check_finite(md.rest, "rest positions");
+  if (md.tets.minCoeff() < 0 || md.tets.maxCoeff() >= n) {
+    std::ostringstream s;
+    s << "tet indices must lie in [0, " << n << "); got range [" << md.tets.minCoeff() << ", "
+      << md.tets.maxCoeff() << "]";
+    fail(s.str());
+  }
+  need_per_tet(md, md.mu.size(), "mu");
+  need_per_tet(md, md.lambda.size(), "lambda");
+  need_per_tet(md, md.density.size(), "density");
+  need_per_tet(md, md.acap_weight.size(), "acap_weight");
+  need_per_tet(md, md.fiber.rows(), "fiber");
+  need_per_tet(md, md.muscle.size(), "muscle");
+  check_finite(md.mu, "mu");
+  check_finite(md.lambda, "lambda");
+  check_finite(md.fiber, "fiber");
+  check_finite(md.density, "density");
+  check_finite(md.acap_weight, "acap_weight");
+  if ((md.mu.array() <= 0).any() || (md.lambda.array() <= 0).any())
     fail("Lame parameters must be positive (Poisson ratio in (0, 0.5))");
-  if ((acap_weight.array() <= 0).any()) fail("ACAP weights must be positive");
-  if (muscle.size() && (muscle.maxCoeff() >= num_muscles || muscle.minCoeff() < -1))
+  if ((md.acap_weight.array() <= 0).any()) fail("ACAP weights must be positive");
+  if (md.muscle.size() && (md.muscle.maxCoeff() >= md.num_muscles || md.muscle.minCoeff() < -1))
     fail("muscle index out of range");
-  if (pinned.size() && (pinned.minCoeff() < 0 || pinned.maxCoeff() >= n))
+  if (md.pinned.size() && (md.pinned.minCoeff() < 0 || md.pinned.maxCoeff() >= n))
     fail("pinned vertex index out of range");
-  for (Eigen::Index i = 1; i < pinned.size(); ++i)
-    if (pinned(i) <= pinned(i - 1)) fail("pinned vertex ids must be sorted and unique");
-  if (bone.size() != 0 && bone.size() != m) need(bone.size(), "bone");
-  if (bone.size()) {
-    if (bone.minCoeff() < -1 || bone.maxCoeff() >= num_bones) fail("bone index out of range");
-    std::vector<int> count(num_bones, 0);
+  for (Eigen::Index i = 1; i < md.pinned.size(); ++i)
+    if (md.pinned(i) <= md.pinned(i - 1)) fail("pinned vertex ids must be sorted and unique");
+}
+
+// Movable bones: per-tet ids, each bone with tets and no muscle tet among them; springs.
+void check_bones(const Model& md) {
+  const Eigen::Index m = md.tets.rows();
+  if (md.bone.size() != 0 && md.bone.size() != m) need_per_tet(md, md.bone.size(), "bone");
+  if (md.bone.size()) {
+    if (md.bone.minCoeff() < -1 || md.bone.maxCoeff() >= md.num_bones) fail("bone index out of range");
+    std::vector<int> count(md.num_bones, 0);
     for (Eigen::Index t = 0; t < m; ++t)
-      if (bone(t) >= 0) {
-        ++count[bone(t)];
-        if (muscle(t) >= 0) fail("a tet cannot belong to both a muscle and a bone");
+      if (md.bone(t) >= 0) {
+        ++count[md.bone(t)];
+        if (md.muscle(t) >= 0) fail("a tet cannot belong to both a muscle and a bone");
       }
-    for (int b = 0; b < num_bones; ++b)
+    for (int b = 0; b < md.num_bones; ++b)
       if (count[b] == 0) fail("movable bone " + std::to_string(b) + " has no tets");
-  } else if (num_bones != 0) {
+  } else if (md.num_bones != 0) {
     fail("num_bones > 0 but no per-tet bone ids were given");
   }
-  if (bone_stiffness.size() != 0 && bone_stiffness.size() != num_bones)
-    fail("bone_stiffness needs one value per movable bone (" + std::to_string(num_bones) + "), got " +
-         std::to_string(bone_stiffness.size()));
-  check_finite(bone_stiffness, "bone_stiffness");
-  if (bone_stiffness.size() && bone_stiffness.minCoeff() < 0) fail("bone_stiffness must be >= 0");
-  if (joint_points.rows() != joint_bones.rows()) fail("joint_points and joint_bones differ in rows");
-  check_finite(joint_points, "joint points");
-  for (Eigen::Index i = 0; i < joint_bones.rows(); ++i) {
-    const int a = joint_bones(i, 0), b = joint_bones(i, 1);
-    if (a < 0 || a >= num_bones || b < -1 || b >= num_bones || a == b)
+  if (md.bone_stiffness.size() != 0 && md.bone_stiffness.size() != md.num_bones)
+    fail("bone_stiffness needs one value per movable bone (" + std::to_string(md.num_bones) + "), got " +
+         std::to_string(md.bone_stiffness.size()));
+  check_finite(md.bone_stiffness, "bone_stiffness");
+  if (md.bone_stiffness.size() && md.bone_stiffness.minCoeff() < 0) fail("bone_stiffness must be >= 0");
+  if (md.joint_points.rows() != md.joint_bones.rows()) fail("joint_points and joint_bones differ in rows");
+  check_finite(md.joint_points, "joint points");
+  for (Eigen::Index i = 0; i < md.joint_bones.rows(); ++i) {
+    const int a = md.joint_bones(i, 0), b = md.joint_bones(i, 1);
+    if (a < 0 || a >= md.num_bones || b < -1 || b >= md.num_bones || a == b)
       fail("declared joint " + std::to_string(i) + " names bones (" + std::to_string(a) + ", " + std::to_string(b) +
            "): the first must be a movable bone, the second another movable bone or -1 (the world)");
   }
-  if (num_scene_tets < 0 || (num_scene_tets > 0 && num_scene_tets < m))
+}
+
+// The scene's tets: num_scene_tets and the distinct scene tet of each tet.
+void check_scene_tets(const Model& md) {
+  const Eigen::Index m = md.tets.rows();
+  if (md.num_scene_tets < 0 || (md.num_scene_tets > 0 && md.num_scene_tets < m))
     fail("num_scene_tets must be 0 (the scene's tets are these) or at least #T (" + std::to_string(m) + ")");
-  if (scene_tet.size()) {
-    need(scene_tet.size(), "scene_tet");
-    const Eigen::Index count = scene_tet_count();
+  if (md.scene_tet.size()) {
+    need_per_tet(md, md.scene_tet.size(), "scene_tet");
+    const Eigen::Index count = md.scene_tet_count();
     std::vector<char> seen(count, 0);
     for (Eigen::Index t = 0; t < m; ++t) {
-      const int s = scene_tet(t);
+      const int s = md.scene_tet(t);
       if (s < 0 || s >= count || seen[s])
         fail("scene_tet must name distinct scene tets in [0, " + std::to_string(count) + "); tet " +
              std::to_string(t) + " names " + std::to_string(s));
       seen[s] = 1;
     }
-  } else if (num_scene_tets > m) {
+  } else if (md.num_scene_tets > m) {
     fail("num_scene_tets exceeds #T: give scene_tet, the scene's tet of each tet");
   }
+}
+}  // namespace
+
+void Model::validate() const {
+  check_mesh_and_materials(*this);
+  check_bones(*this);
+  check_scene_tets(*this);
   if (pinned.size() == 0)
     fail("the scene is not anchored: pin some vertices (scene.pin) or fix a bone; "
          "otherwise it can move freely and no equilibrium is unique");

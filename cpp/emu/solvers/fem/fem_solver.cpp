@@ -213,59 +213,15 @@ class FemSolver::NewtonProblem {
     // retried only once the iteration is in the Newton regime (last step full).
     const bool try_exact = s_.options_.exact_when_definite && (last_exact_ok_ || last_step_ == 1.0);
     const int factorizations0 = s_.factorizations_;
-    // The element Hessians assembled into values_ (exact or filtered), once per
-    // kind: the lagged PCG only reads them, so its fallback reuses them.
-    int assembled = -1;  // -1: none, 0: filtered, 1: exact
-    auto assemble = [&](bool exact) {
-      if (assembled == int(exact)) return;
-      ScopedSeconds timer(time.hessian);
-      s_.assemble_hessian(x_, act_, exact);
-      assembled = int(exact);
-    };
-    if (s_.options_.lagged_cg_iterations > 0 && s_.lag_.valid && !s_.has_contact()) {
-      // Newton-CG on the lagged factor, to the forcing term of EMU's CG
-      // (Eisenstat-Walker); a factorisation only when that does not converge.
-      assemble(try_exact);
-      ScopedSeconds timer(time.linear_solve);
-      const double eta = std::min(s_.options_.lagged_cg_forcing, std::sqrt(gn_ / g0_));
-      if (lagged_direction(try_exact, eta * gn_, dir.cg_iterations) && slope() < 0) {
-        if (!try_exact) ++dir.filtered;
-        last_neutral_.clear();
-        dir.slope = slope();
-        return dir;  // (no contact here: no collision cap needed)
-      }
+    assembled_ = -1;
+    if (s_.options_.lagged_cg_iterations > 0 && s_.lag_.valid && !s_.has_contact() &&
+        lagged_newton_step(try_exact, dir, time)) {
+      if (!try_exact) ++dir.filtered;
+      last_neutral_.clear();
+      dir.slope = slope();
+      return dir;  // (no contact here: no collision cap needed)
     }
-    bool have = false;
-    if (try_exact) {
-      assemble(true);
-      ScopedSeconds timer(time.linear_solve);
-      if (newton_direction(true) && slope() < 0) {
-        last_exact_ok_ = true;
-        have = true;
-      } else {
-        ++dir.exact_failed;
-        last_exact_ok_ = false;
-      }
-    }
-    if (!have) {
-      ++dir.filtered;
-      assemble(false);
-      {
-        ScopedSeconds timer(time.linear_solve);
-        if (!filtered_direction())
-          return dir.fail(
-              "Newton matrix is not positive definite even after regularisation: likely a part that nothing "
-              "anchors (no pin, fixed bone or joint holds it), or collapsed tets (see scene.mesh_report and "
-              "Solution.inverted_tets)");
-      }
-      if (try_exact && s_.options_.negative_curvature && !nd_ && !s_.has_contact() &&
-          -slope() <= kSaddleDecrease * (E0_ - E_)) {
-        ScopedSeconds timer(time.linear_solve);
-        dir.negative_curvature = add_negative_curvature();
-      }
-    }
-    last_neutral_ = have ? std::vector<NeutralMode>() : neutral_;
-    neutral_.clear();
+    if (!factorised_step(try_exact, dir, time)) return dir;
     dir.factorizations = s_.factorizations_ - factorizations0;
     if (s_.has_contact() && !cap_at_collision()) {
       ScopedSeconds timer(time.line_search);
@@ -275,6 +231,60 @@ class FemSolver::NewtonProblem {
     dir.slope = slope();
     if (!(dir.slope < 0)) return dir.fail("Newton direction is not a descent direction");
     return dir;
+  }
+
+  // The element Hessians assembled into values_ (exact or filtered), once per
+  // kind and direction: the lagged PCG only reads them, so its fallback reuses them.
+  void assemble(bool exact, PhaseTimes& time) {
+    if (assembled_ == int(exact)) return;
+    ScopedSeconds timer(time.hessian);
+    s_.assemble_hessian(x_, act_, exact);
+    assembled_ = int(exact);
+  }
+
+  // Newton-CG on the lagged factor, to the forcing term of EMU's CG
+  // (Eisenstat-Walker): true where it converged to a descent direction (else
+  // a factorisation follows).
+  bool lagged_newton_step(bool try_exact, SearchDirection& dir, PhaseTimes& time) {
+    assemble(try_exact, time);
+    ScopedSeconds timer(time.linear_solve);
+    const double eta = std::min(s_.options_.lagged_cg_forcing, std::sqrt(gn_ / g0_));
+    return lagged_direction(try_exact, eta * gn_, dir.cg_iterations) && slope() < 0;
+  }
+
+  // A factorised step: the exact matrix where it is definite and descends,
+  // else the filtered one (with FEM's negative-curvature step at a saddle);
+  // the neutral modes of a filtered step kept for the result. False: dir failed.
+  bool factorised_step(bool try_exact, SearchDirection& dir, PhaseTimes& time) {
+    bool have = false;
+    if (try_exact) {
+      assemble(true, time);
+      ScopedSeconds timer(time.linear_solve);
+      have = newton_direction(true) && slope() < 0;
+      last_exact_ok_ = have;
+      if (!have) ++dir.exact_failed;
+    }
+    if (!have) {
+      ++dir.filtered;
+      assemble(false, time);
+      {
+        ScopedSeconds timer(time.linear_solve);
+        if (!filtered_direction()) {
+          dir.fail("Newton matrix is not positive definite even after regularisation: likely a part that nothing "
+                   "anchors (no pin, fixed bone or joint holds it), or collapsed tets (see scene.mesh_report and "
+                   "Solution.inverted_tets)");
+          return false;
+        }
+      }
+      if (try_exact && s_.options_.negative_curvature && !nd_ && !s_.has_contact() &&
+          -slope() <= kSaddleDecrease * (E0_ - E_)) {
+        ScopedSeconds timer(time.linear_solve);
+        dir.negative_curvature = add_negative_curvature();
+      }
+    }
+    last_neutral_ = have ? std::vector<NeutralMode>() : neutral_;
+    neutral_.clear();
+    return true;
   }
 
   /// Contact: shortens the step to the largest one along which no surfaces
@@ -569,6 +579,7 @@ class FemSolver::NewtonProblem {
   Pcg<Eigen::VectorXd> pcg_;
   double E_ = 0, E0_ = 0, gn_ = 0, g0_ = 0, last_step_ = 0;
   bool last_exact_ok_ = true, last_exact_ = false;
+  int assembled_ = -1;  // the kind of Hessian in values_ this direction: -1 none, 0 filtered, 1 exact
   bool lagged_indefinite_ = false;  // the last lagged PCG met p^T H p <= 0
   std::vector<NeutralMode> neutral_, last_neutral_;  // of the current / last step
   Eigen::MatrixXd last_S_;
