@@ -23,12 +23,10 @@
 #include "emu/solvers/newton/pcg.h"
 #include "emu/solvers/newton/rounding_perturbation.h"
 #include "emu/solvers/emu/schur_preconditioner.h"
+#include "emu/solvers/emu/step_solver.h"
 #include "emu/solvers/emu/woodbury.h"
 
 namespace emu {
-namespace {
-double dot(const Mat9X& a, const Mat9X& b) { return a.cwiseProduct(b).sum(); }
-}  // namespace
 
 EmuSolver::EmuSolver(const Model& model, const SolverOptions& options, const EmuSolverOptions& emu_options,
                      PositionTerm contact)
@@ -429,7 +427,7 @@ class EmuSolver::NewtonProblem {
         c_(c),
         bones_(s.layout_.num_bones > 0),
         F_(std::move(F)),
-        coarse_(s.layout_, s.emu_.alpha, s.turn_fits_ ? s.turn_fits_->follow_fields() : std::vector<const Mat9X*>()) {
+        step_(s, c, F_, g_, gR_, gn_, g0_, d_) {
     s_.fit_into(c_, F_, x_, Fx_);
     E_ = s_.total_energy(c_, F_, Fx_, x_);
     if (s_.has_contact()) s_.contact_.check_start_state(x_, E_);
@@ -440,35 +438,19 @@ class EmuSolver::NewtonProblem {
   double grad_norm() const { return gn_; }
   /// The fit of the current iterate.
   const Eigen::MatrixX3d& positions() const { return x_; }
-  const std::vector<NeutralMode>& neutral_modes() const { return coarse_.neutral_modes(); }
+  const std::vector<NeutralMode>& neutral_modes() const { return step_.neutral_modes(); }
 
-  // A step's direction: refresh the blocks (and the preconditioner when due),
-  // the contact Hessian, the bone coarse space, then the step's kind
-  // (Woodbury, L-BFGS, or a Krylov solve), a descent check, and a cap where
-  // contact's collision detection allows less than the full step.
+  // A step's direction (StepSolver: the blocks, the preconditioner, the bone
+  // coarse space, the step's kind and a descent check), its fit along the
+  // line, and a cap where contact's collision detection allows less than the
+  // full step.
   SearchDirection direction(int it, PhaseTimes& time) {
     SearchDirection dir;
     const bool exact = exact_allowed_ && exact_ok_;
     if (exact_allowed_ && !exact) ++dir.filtered;
-    bool refreshed = false;
-    if (!refresh_blocks(it, exact, dir, time, refreshed)) return dir;
-    const std::vector<Mat9>& H = exact ? A_exact_ : A_;
-    if (s_.has_contact()) {
-      ScopedSeconds timer(time.hessian);
-      Hc_ = s_.contact_.checked_hessian(x_);
-    }
-    const auto product = [&](const Mat9X& v, Mat9X& out) { hessian_product(H, exact, v, out); };
-    for (Mat9X& r : recycled_) s_.project_tangent(F_, r);  // tangent at the current bones
-    // The bone coarse space follows the Hessian CG uses (rebuilt every step;
-    // for L-BFGS, whose H0 it is part of, with the preconditioner).
-    if (bones_ && s_.emu_.bone_coarse_space && (s_.emu_.step != EmuStep::Lbfgs || refreshed)) {
-      ScopedSeconds timer(time.preconditioner);
-      build_coarse_space(H, exact, product);
-    }
-    ++since_refresh_;
+    if (!step_.direction(it, exact, x_, dir, time)) return dir;
     {
-      ScopedSeconds timer(time.linear_solve);  // the step and the direction's fit
-      if (!step_direction(product, dir)) return dir;
+      ScopedSeconds timer(time.linear_solve);  // the direction's fit
       prepare_line();
     }
     if (s_.has_contact() && !cap_at_contact(dir, time)) return dir;
@@ -523,17 +505,11 @@ class EmuSolver::NewtonProblem {
       Fx_ += s * Fd_;
       E_ = E_trial;
     }
-    if (s_.emu_.step == EmuStep::Lbfgs) {
-      // The pair of this step: s d (tangent at the old bones) and the change of
-      // the tangent gradient (no vector transport: the bones turn little per step).
-      Mat9X g_old = gR_;
-      update_gradient();
-      lbfgs_.push(s * d_, gR_ - g_old);
-    } else {
-      update_gradient();
-    }
-    last_cg_ = dir_cg_;
-    if (cg_after_refresh_ < 0) cg_after_refresh_ = dir_cg_;
+    // L-BFGS's pair of this step: s d (tangent at the old bones) and the change of
+    // the tangent gradient (no vector transport: the bones turn little per step)
+    const Mat9X g_old = s_.emu_.step == EmuStep::Lbfgs ? gR_ : Mat9X();
+    update_gradient();
+    step_.stepped(s, dir_cg_, s_.emu_.step == EmuStep::Lbfgs ? Mat9X(gR_ - g_old) : Mat9X());
     // CG on an indefinite exact Hessian need not meet negative curvature: its
     // step can be long and mostly cut by the line search. After such a step
     // (s < 1/2) the filtered Hessian is used until a full step is taken again,
@@ -551,156 +527,6 @@ class EmuSolver::NewtonProblem {
   }
 
  private:
-  // The blocks A_u at F_: the filtered ones (and the preconditioner built on
-  // them) every preconditioner_refresh steps, or sooner when CG slows down by
-  // half since the last rebuild, the exact ones every step they are used.
-  // Between rebuilds the preconditioner lags behind the exact products
-  // (L-BFGS's curvature pairs make up for it); the Woodbury step rebuilds it
-  // every step, as the paper does. False: dir has failed.
-  bool refresh_blocks(int it, bool exact, SearchDirection& dir, PhaseTimes& time, bool& refreshed) {
-    const EmuSolverOptions& o = s_.emu_;
-    const bool lbfgs = o.step == EmuStep::Lbfgs;
-    refreshed = (!exact && !lbfgs) || it == 1 || since_refresh_ >= o.preconditioner_refresh ||
-                (cg_after_refresh_ >= 0 && last_cg_ > 1.5 * cg_after_refresh_ + 5);
-    if (!refreshed) {
-      if (!lbfgs) {
-        ScopedSeconds timer(time.hessian);
-        s_.blocks_into(c_, F_, nullptr, &A_exact_);
-      }
-      return true;
-    }
-    {
-      ScopedSeconds timer(time.hessian);
-      s_.blocks_into(c_, F_, &A_, exact ? &A_exact_ : nullptr);
-    }
-    ScopedSeconds timer(time.preconditioner);
-    BlockPreconditioner& pc = *s_.preconditioner_;
-    if (pc.factorises_on_update()) ++dir.factorizations;
-    if (!pc.update(A_)) {
-      dir.fail(pc.failure());
-      return false;
-    }
-    since_refresh_ = 0;
-    cg_after_refresh_ = -1;
-    return true;
-  }
-
-  // out = H v with H's blocks (exact or filtered), Riemannian with bones (the
-  // spring's curvature with exact blocks); contact's curvature J^T H_c J
-  // enters the products (the preconditioner leaves it out), its bone columns
-  // projected like the rest.
-  void hessian_product(const std::vector<Mat9>& H, bool exact, const Mat9X& v, Mat9X& out) const {
-    if (bones_) s_.riemannian_product(H, F_, g_, v, exact, out);
-    else s_.hessian_product_into(H, v, out);
-    if (s_.has_contact() && Hc_.nonZeros()) {
-      Mat9X add = Mat9X::Zero(9, out.cols());
-      s_.jacobian_->add_hessian_product(Hc_, v, add);
-      if (bones_) s_.project_tangent(F_, add);
-      out += add;
-    }
-  }
-
-  template <class Product>
-  void build_coarse_space(const std::vector<Mat9>& H, bool exact, const Product& product) {
-    // bone b's turns by M (3 tangents) and H of them, in one pass over H's blocks
-    const auto turn = [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
-      s_.turn_fits_->turns<3>(H, b, M, s_.emu_.alpha, s_.acap_->weight_volume(), Z, HZ);
-      for (int k = 0; k < 3; ++k) {
-        if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
-        else
-          s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
-      }
-    };
-    if (!s_.joints_) {
-      coarse_.build(F_, turn, product, recycled_);
-      return;
-    }
-    // In joint coordinates the bones' turns serve twice, made once: the
-    // smoothed joint turns are combinations of them, and the coarse space
-    // takes them as they are (its turn k of bone b is [e_k]x F_b, as here).
-    const int nb = s_.layout_.num_bones;
-    std::vector<std::array<Mat9X, 3>> Zb(nb), HZb(nb);
-    for (int b = 0; b < nb; ++b) {
-      std::array<Mat3, 3> M;
-      for (int k = 0; k < 3; ++k) M[k] = cross_matrix(Vec3::Unit(k)) * unflatten(F_.col(s_.layout_.num_soft + b));
-      turn(b, M, Zb[b], HZb[b]);
-    }
-    const Eigen::MatrixXd turn_map = s_.joints_->turn_map(F_);
-    coarse_.build(
-        F_,
-        [&](int b, const std::array<Mat3, 3>&, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
-          Z = std::move(Zb[b]);
-          HZ = std::move(HZb[b]);
-        },
-        product, smoothed_joint_turns(Zb, HZb, turn_map), &turn_map);
-  }
-
-  // The recycled directions and each joint's turn z = Z T (H z = (H Z) T,
-  // from the bones' turns Zb, HZb) smoothed once by the base preconditioner,
-  // z - B H z: the coarse turns' soft tissue follows as the fit places it,
-  // stiffer than the material lets it follow, and without the smoothed turns
-  // CG's truncated steps are short along a chain's soft turns while the
-  // answer is still far (docs/DESIGN.md, "Chains of bones in EMU").
-  std::vector<Mat9X> smoothed_joint_turns(const std::vector<std::array<Mat9X, 3>>& Zb,
-                                          const std::vector<std::array<Mat9X, 3>>& HZb,
-                                          const Eigen::MatrixXd& turn_map) const {
-    std::vector<Mat9X> extra = recycled_;
-    const int nb = s_.layout_.num_bones, nu = s_.layout_.num_unknowns;
-    Mat9X z, Hz, BHz;
-    for (Eigen::Index j = 0; j < turn_map.cols(); ++j) {
-      z.setZero(9, nu);
-      Hz.setZero(9, nu);
-      for (int b = 0; b < nb; ++b)
-        for (int k = 0; k < 3; ++k) {
-          const double t = turn_map(3 * b + k, j);
-          if (t == 0.0) continue;
-          z += t * Zb[b][k];
-          Hz += t * HZb[b][k];
-        }
-      s_.base_precondition(F_, Hz, BHz);
-      extra.push_back(z - BHz);
-    }
-    return extra;
-  }
-
-  // d_ by the step's kind: the preconditioner's step (Woodbury), L-BFGS on it,
-  // or inexact Newton: PCG on H d = -g to |r| <= eta |g| (Eisenstat-Walker)
-  // and until the quadratic model stops falling fast (Nash-Sofer). A
-  // direction that does not descend is replaced by the preconditioner's.
-  // False: dir has failed.
-  template <class Product>
-  bool step_direction(const Product& product, SearchDirection& dir) {
-    const EmuSolverOptions& o = s_.emu_;
-    const auto precond = [&](const Mat9X& r, Mat9X& z) { precondition(r, z); };
-    if (o.step == EmuStep::Woodbury) {
-      precondition(gR_, d_);
-      d_ = -d_;
-    } else if (o.step == EmuStep::Lbfgs) {
-      lbfgs_.apply(gR_, precond, d_);
-      d_ = -d_;
-    } else {
-      const double eta =
-          std::min(o.cg_forcing_max, std::max(o.cg_forcing_min, std::pow(gn_ / g0_, o.cg_forcing_exponent)));
-      const PcgResult cg =
-          pcg_.solve(product, precond, Mat9X(-gR_), eta * gn_, o.cg_max_iterations, d_, o.cg_model_decrease);
-      dir.cg_iterations = cg.iterations;
-      if (cg.negative_curvature) ++dir.filtered;  // exact H is indefinite here: keep what CG had
-    }
-    if (o.recycled_directions > 0 && bones_ && o.bone_coarse_space && dir.cg_iterations > std::max(50, 4 * last_cg_))
-      recycle(d_);  // only where a coarse space takes them
-    dir.slope = dot(gR_, d_);
-    if (!(dir.slope < 0)) {
-      precondition(gR_, d_);
-      d_ = -d_;
-      dir.slope = dot(gR_, d_);
-      if (!(dir.slope < 0)) {
-        dir.fail("no descent direction (Hessian approximation broke down)");
-        return false;
-      }
-    }
-    return true;
-  }
-
   // Without bones x*(F + s d) = x + s dx: one fit per direction. A bone's
   // path R + s d is retracted to rotations, so each trial refits.
   void prepare_line() {
@@ -732,17 +558,6 @@ class EmuSolver::NewtonProblem {
     return true;
   }
 
-  // A CG solve far longer than the last one met a mode the preconditioner
-  // misses; its direction (orthogonalised against those kept) joins the bone
-  // coarse space of the following steps, the oldest dropped beyond
-  // EmuSolverOptions::recycled_directions (docs/DESIGN.md, "The cost of an iteration").
-  void recycle(const Mat9X& d) {
-    Mat9X dn = d;
-    for (const Mat9X& r : recycled_) dn -= (dot(r, dn) / dot(r, r)) * r;
-    if (!(dn.norm() > 1e-3 * d.norm())) return;
-    recycled_.push_back(std::move(dn));
-    if (static_cast<int>(recycled_.size()) > s_.emu_.recycled_directions) recycled_.erase(recycled_.begin());
-  }
   // Contact: the largest step s <= 1 along d_ whose fitted positions' straight
   // path creates no intersection (without bones x*(F + s d) = x + s dx exactly).
   double collision_free_step() {
@@ -788,11 +603,6 @@ class EmuSolver::NewtonProblem {
     gn_ = gR_.norm();
     if (g0_ < 0) g0_ = gn_;
   }
-  void precondition(const Mat9X& in, Mat9X& out) const {
-    auto base = [&](const Mat9X& r, Mat9X& z) { s_.base_precondition(F_, r, z); };
-    if (bones_) coarse_.apply(in, out, base);
-    else base(in, out);
-  }
 
   EmuSolver& s_;
   const Context& c_;
@@ -801,14 +611,9 @@ class EmuSolver::NewtonProblem {
   Mat9X F_, Fx_, g_, gR_, d_, Fd_, Ftrial_, Fxtrial_;
   Eigen::MatrixX3d x_, dx_, xtrial_;
   double E_ = 0, gn_ = 0, g0_ = -1, Wx_ = 0, Wdx_ = 0, trial_s_ = -1;
-  std::vector<Mat9> A_, A_exact_;
-  Eigen::SparseMatrix<double> Hc_;  // contact Hessian at the iterate (3 #V square)
   bool exact_ok_ = true, exact_step_ = false;
-  int since_refresh_ = 0, cg_after_refresh_ = -1, last_cg_ = 0, dir_cg_ = 0;
-  BoneCoarseSpace coarse_;
-  std::vector<Mat9X> recycled_;
-  Pcg<Mat9X> pcg_;
-  LbfgsMemory<Mat9X> lbfgs_{s_.emu_.lbfgs_memory};
+  int dir_cg_ = 0;
+  StepSolver step_;  // after the members it reads
 };
 
 SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {

@@ -102,6 +102,7 @@ class EmuSolver {
     Mat9X F_gravity;             // F_t(L^-1 f): the load's share of the gradient
   };
   class NewtonProblem;  // one solve's problem, as the Newton driver minimises it (emu_solver.cpp)
+  class StepSolver;     // the linear algebra of its steps (step_solver.h)
   friend struct EmuSolverTesting;  // the pieces one at a time, for tests and benchmarks (emu_solver_testing.h)
   /// Setup: the preconditioner EmuSolverOptions choose (with the ACAP modes for Woodbury's).
   void build_preconditioner();
