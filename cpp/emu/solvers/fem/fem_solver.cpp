@@ -1,5 +1,6 @@
 #include "emu/solvers/fem/fem_solver.h"
 #include "emu/solvers/fem/fem_solver_testing.h"
+#include "emu/solvers/fem/step_solver.h"
 
 #include <algorithm>
 #include <cmath>
@@ -156,16 +157,12 @@ namespace {
 // newton_correction with a lagged factor: PCG to this fraction of the
 // gradient (the correction, an error estimate, needs a few digits).
 constexpr double kCorrectionResidual = 1e-3;
-// The negative-curvature step (add_negative_curvature): looked for where the
-// exact Hessian is indefinite and the filtered step stalls, its slope -g.d
-// (twice the decrease it predicts) at most kSaddleDecrease of the decrease so
-// far (only near a stationary point: far from one it costs iterations);
-// power iterations to kCurvatureRtol; taken where v^T H v <= (1 -
-// kCurvatureMin) v^T H+ v (clearly negative); its largest vertex move
-// kCurvatureLength of the mesh diagonal (the outcome is insensitive to it;
-// docs/stability.md).
-constexpr double kSaddleDecrease = 1e-3, kCurvatureRtol = 1e-3, kCurvatureMin = 1.01, kCurvatureLength = 1e-2;
-constexpr int kCurvatureIterations = 40;
+// The negative-curvature step (StepSolver::add_negative_curvature): looked for
+// where the exact Hessian is indefinite and the filtered step stalls, its
+// slope -g.d (twice the decrease it predicts) at most kSaddleDecrease of the
+// decrease so far (only near a stationary point: far from one it costs
+// iterations).
+constexpr double kSaddleDecrease = 1e-3;
 }  // namespace
 
 // One FEM solve as the Newton driver sees it. The iterate is the positions x
@@ -174,7 +171,7 @@ constexpr int kCurvatureIterations = 40;
 class FemSolver::NewtonProblem {
  public:
   NewtonProblem(FemSolver& s, const LoadCase& load, Eigen::VectorXd act, const Eigen::MatrixX3d* initial)
-      : s_(s), load_(load), act_(std::move(act)), nd_(s.bones_.dofs()) {
+      : s_(s), load_(load), act_(std::move(act)), nd_(s.bones_.dofs()), step_(s, act_, x_, poses_, fv_, gs_, gb_, ds_, db_) {
     x_ = pinned_positions(s_.model_, load_);
     if (initial) {
       if (initial->rows() != x_.rows() || !initial->allFinite())
@@ -199,8 +196,8 @@ class FemSolver::NewtonProblem {
   const Eigen::VectorXd& bone_gradient() const { return gb_; }
   const std::vector<NeutralMode>& neutral_modes() const { return last_neutral_; }
   /// The bone Schur complement of the last factorised Newton step (empty: none yet) and its poses.
-  const Eigen::MatrixXd& last_bone_schur() const { return last_S_; }
-  const BonePoses& last_schur_poses() const { return last_S_poses_; }
+  const Eigen::MatrixXd& last_bone_schur() const { return step_.last_bone_schur(); }
+  const BonePoses& last_schur_poses() const { return step_.last_schur_poses(); }
 
   SearchDirection direction(int /*iteration*/, PhaseTimes& time) {
     SearchDirection dir;
@@ -249,7 +246,7 @@ class FemSolver::NewtonProblem {
     assemble(try_exact, time);
     ScopedSeconds timer(time.linear_solve);
     const double eta = std::min(s_.options_.lagged_cg_forcing, std::sqrt(gn_ / g0_));
-    return lagged_direction(try_exact, eta * gn_, dir.cg_iterations) && slope() < 0;
+    return step_.lagged_direction(try_exact, eta * gn_, dir.cg_iterations) && slope() < 0;
   }
 
   // A factorised step: the exact matrix where it is definite and descends,
@@ -260,7 +257,7 @@ class FemSolver::NewtonProblem {
     if (try_exact) {
       assemble(true, time);
       ScopedSeconds timer(time.linear_solve);
-      have = newton_direction(true) && slope() < 0;
+      have = step_.newton_direction(true) && slope() < 0;
       last_exact_ok_ = have;
       if (!have) ++dir.exact_failed;
     }
@@ -269,7 +266,7 @@ class FemSolver::NewtonProblem {
       assemble(false, time);
       {
         ScopedSeconds timer(time.linear_solve);
-        if (!filtered_direction()) {
+        if (!step_.filtered_direction()) {
           dir.fail("Newton matrix is not positive definite even after regularisation: likely a part that nothing "
                    "anchors (no pin, fixed bone or joint holds it), or collapsed tets (see scene.mesh_report and "
                    "Solution.inverted_tets)");
@@ -279,11 +276,11 @@ class FemSolver::NewtonProblem {
       if (try_exact && s_.options_.negative_curvature && !nd_ && !s_.has_contact() &&
           -slope() <= kSaddleDecrease * (E0_ - E_)) {
         ScopedSeconds timer(time.linear_solve);
-        dir.negative_curvature = add_negative_curvature();
+        dir.negative_curvature = step_.add_negative_curvature();
       }
     }
-    last_neutral_ = have ? std::vector<NeutralMode>() : neutral_;
-    neutral_.clear();
+    std::vector<NeutralMode> found = step_.take_neutral();
+    last_neutral_ = have ? std::vector<NeutralMode>() : std::move(found);
     return true;
   }
 
@@ -350,10 +347,8 @@ class FemSolver::NewtonProblem {
 
   /// The Newton matrix at the current iterate (after s_.assemble_hessian) as
   /// the bone border and Schur solve see it; see reduced_system.
-  void border(bool exact, Eigen::MatrixXd& Hsb, Eigen::MatrixXd& Hbb) {
-    s_.bones_.assemble_border(poses_, s_.element_, x_, fv_, exact, Hsb, Hbb);
-    if (s_.has_contact()) s_.bones_.add_vertex_hessian(poses_, x_, s_.contact_H_, Hsb, Hbb);
-  }
+  /// The bones' border of the Newton matrix at the iterate (StepSolver::border).
+  void border(bool exact, Eigen::MatrixXd& Hsb, Eigen::MatrixXd& Hbb) { step_.border(exact, Hsb, Hbb); }
 
   /// Positions and poses after the step s (ds, db) from the current iterate.
   void step_positions(double s, Eigen::MatrixX3d& x, BonePoses& poses) const {
@@ -376,17 +371,19 @@ class FemSolver::NewtonProblem {
     s_.assemble_hessian(x_, act_, exact);
     last_exact_ = exact;
     int cg = 0;  // with a lagged factor, PCG first (SolverOptions::lagged_cg_iterations)
-    lagged_indefinite_ = false;
-    const bool lagged = s_.options_.lagged_cg_iterations > 0 && !s_.has_contact();
-    if (lagged && lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
+    bool indefinite = false;
+    if (s_.options_.lagged_cg_iterations > 0 && !s_.has_contact()) {
+      if (step_.lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
+      indefinite = step_.lagged_indefinite();
+    }
     // where PCG met p^T H p <= 0 the matrix is not definite: its factorisation
     // would fail, so none is tried
-    if (!lagged_indefinite_ && newton_direction(true) && slope() < 0) return true;
+    if (!indefinite && step_.newton_direction(true) && slope() < 0) return true;
     last_exact_ = false;
     s_.assemble_hessian(x_, act_, false);
     // the filtered matrix is definite: PCG on the lagged factor first here too
-    if (lagged_indefinite_ && lagged_direction(false, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
-    return filtered_direction() && slope() < 0;
+    if (indefinite && step_.lagged_direction(false, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
+    return step_.filtered_direction() && slope() < 0;
   }
   /// The exact Newton step by PCG on the lagged factor alone (no factorisation,
   /// no filtered fallback): false where there is no lagged factor, PCG misses
@@ -397,7 +394,7 @@ class FemSolver::NewtonProblem {
     s_.assemble_hessian(x_, act_, true);
     last_exact_ = true;
     int cg = 0;
-    return lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0;
+    return step_.lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0;
   }
   /// Whether the last correction_direction used the exact element Hessians.
   bool last_direction_exact() const { return last_exact_; }
@@ -428,162 +425,18 @@ class FemSolver::NewtonProblem {
     s_.bones_.gradient(poses, x, fv_, gb);
   }
 
-  // The Newton direction from the assembled soft block and the bone border;
-  // false if the matrix is not positive definite.
-  bool newton_direction(bool exact) {
-    ++s_.factorizations_;
-    s_.lag_.valid = false;  // the factor is being replaced
-    if (!s_.factorize_newton_matrix()) return false;
-    const CholmodFactor& factor = s_.newton_factor();
-    y_.resize(gs_.size());
-    factor.solve(gs_.data(), y_.data(), 1);
-    if (!nd_) {
-      ds_ = -y_;
-      s_.lag_.valid = !s_.use_merged_;
-      return true;
-    }
-    border(exact, Hsb_, Hbb_);
-    Wsb_.resize(Hsb_.rows(), nd_);
-    factor.solve(Hsb_.data(), Wsb_.data(), nd_);
-    Eigen::MatrixXd S = Hbb_ - Hsb_.transpose() * Wsb_;
-    S = 0.5 * (S + S.transpose()).eval();
-    const Eigen::VectorXd rb = -gb_ + Hsb_.transpose() * y_;
-    last_S_ = S;
-    last_S_poses_ = poses_;
-    if (!s_.bones_.solve_schur(poses_, S, rb, exact, db_, neutral_)) return false;
-    ds_ = -y_ - Wsb_ * db_;
-    keep_bone_border(S);
-    return true;
-  }
-
-  // The bone border of the factorisation just made, for lagged_direction; a
-  // singular bone Schur complement (a neutral mode) leaves no preconditioner.
-  void keep_bone_border(const Eigen::MatrixXd& S) {
-    Eigen::LLT<Eigen::MatrixXd> llt(S);
-    if (llt.info() != Eigen::Success || !neutral_.empty() || s_.use_merged_) return;
-    s_.lag_.Hsb = Hsb_;
-    s_.lag_.Wsb = Wsb_;
-    s_.lag_.S_inv = llt.solve(Eigen::MatrixXd::Identity(nd_, nd_));
-    s_.lag_.valid = true;
-  }
-
-  // Newton-CG with the lagged factor as preconditioner (SolverOptions::
-  // lagged_cg_iterations): PCG on the current Newton matrix (soft block K from
-  // the assembled values, bone border Hsb, Hbb) to |r| <= tol, the inverse of
-  // the factorised matrix applied by block elimination:
-  //   y_s = K_lag^-1 r_s,  z_b = S_lag^-1 (r_b - Hsb_lag^T y_s),  z_s = y_s - K_lag^-1 Hsb_lag z_b.
-  // False (nothing changed) if it does not converge within the cap or meets
-  // negative curvature (lagged_indefinite_: the matrix is not definite, and
-  // newton_correction then factorises only the filtered one): the caller
-  // factorises instead.
-  bool lagged_direction(bool exact_border, double tol, int& cg_iterations) {
-    const FemSolver::LaggedFactor& lag = s_.lag_;
-    lagged_indefinite_ = false;
-    if (!lag.valid) return false;
-    const Eigen::Index ns = gs_.size();
-    if (nd_) border(exact_border, Hsb_, Hbb_);
-    auto product = [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
-      out.resize(v.size());
-      const BlockPattern& P = s_.pattern_;
-      symmetric_upper_product(P.rows(), P.col_ptr().data(), P.row_index().data(), s_.values_.data(), v.data(),
-                              out.data());
-      if (!nd_) return;
-      out.head(ns).noalias() += Hsb_ * v.tail(nd_);
-      out.tail(nd_).noalias() = Hsb_.transpose() * v.head(ns) + Hbb_ * v.tail(nd_);
-    };
-    auto precondition = [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
-      z.resize(r.size());
-      s_.factor_.solve(r.data(), z.data(), 1);
-      if (!nd_) return;
-      const Eigen::VectorXd zb = lag.S_inv * (r.tail(nd_) - lag.Hsb.transpose() * z.head(ns));
-      z.head(ns).noalias() -= lag.Wsb * zb;
-      z.tail(nd_) = zb;
-    };
-    Eigen::VectorXd b(ns + nd_), d;
-    b.head(ns) = -gs_;
-    if (nd_) b.tail(nd_) = -gb_;
-    const PcgResult cg = pcg_.solve(product, precondition, b, tol, s_.options_.lagged_cg_iterations, d);
-    cg_iterations = cg.iterations;
-    lagged_indefinite_ = cg.negative_curvature;
-    if (!cg.converged) return false;
-    ds_ = d.head(ns);
-    if (nd_) db_ = d.tail(nd_);
-    return true;
-  }
-
-  // Near a stationary point where the exact Hessian H is indefinite (a saddle:
-  // a symmetric shape about to buckle) the filtered Newton step barely moves
-  // along H's negative curvature, and leaving the saddle waits for round-off
-  // to grow the asymmetry, which is slow (docs/DESIGN.md, "Saddles: FEM's
-  // negative-curvature step").
-  // Add the direction of H's most negative curvature relative to the filtered
-  // matrix H+ just factorised (linalg/negative_curvature.h: power iteration on
-  // H+^-1 N, N = H+ - H), pointing downhill, one hundredth of the mesh
-  // diagonal long at its largest vertex move; the line search scales the sum.
-  // Returns 1 if it did (movable bones: not yet, their border is left out).
-  int add_negative_curvature() {
-    const BlockPattern& P = s_.pattern_;
-    std::vector<double> plus = s_.values_;  // H+ as factorised (with any diagonal shift)
-    s_.assemble_hessian(x_, act_, true);
-    std::vector<double>& filtered_away = s_.values_;  // N = H+ - H: PSD
-    for (size_t k = 0; k < plus.size(); ++k) filtered_away[k] = plus[k] - filtered_away[k];
-    auto product = [&P](const std::vector<double>& values) {
-      return [&P, &values](const Eigen::VectorXd& v, Eigen::VectorXd& y) {
-        y.resize(v.size());
-        symmetric_upper_product(P.rows(), P.col_ptr().data(), P.row_index().data(), values.data(), v.data(),
-                                y.data());
-      };
-    };
-    const CurvatureDirection c = most_negative_curvature(
-        gs_.size(), product(filtered_away), product(plus),
-        [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
-          z.resize(r.size());
-          s_.factor_.solve(r.data(), z.data(), 1);
-        },
-        kCurvatureIterations, kCurvatureRtol);
-    s_.values_.swap(plus);  // the factorised matrix again
-    if (!(c.mu >= kCurvatureMin)) return 0;
-    Eigen::VectorXd v = gs_.dot(c.v) > 0 ? Eigen::VectorXd(-c.v) : c.v;
-    double largest = 0;
-    for (Eigen::Index i = 0; i < v.size() / 3; ++i) largest = std::max(largest, v.segment<3>(3 * i).norm());
-    if (!(largest > 0)) return 0;
-    ds_ += (kCurvatureLength * bbox_diagonal(s_.model_.rest) / largest) * v;
-    return 1;
-  }
-
-  // Projected element Hessians make H PSD; a pinned scene makes it definite.
-  // Round-off can still break the Cholesky: shift the diagonal and retry.
-  bool filtered_direction() {
-    if (newton_direction(false)) return true;
-    const BlockPattern& P = s_.pattern_;
-    double shift = 0;
-    for (int retry = 0; retry < 8; ++retry) {
-      double dmax = 0;
-      for (int j = 0; j < P.rows(); ++j) dmax = std::max(dmax, s_.values_[P.col_ptr()[j + 1] - 1]);
-      const double add = (shift == 0 ? 1e-10 * dmax : shift * 9.0);
-      for (int j = 0; j < P.rows(); ++j) s_.values_[P.col_ptr()[j + 1] - 1] += add;
-      shift += add;
-      if (newton_direction(false)) return true;
-    }
-    return false;
-  }
-
   FemSolver& s_;
   const LoadCase& load_;
   const Eigen::VectorXd act_;
   const int nd_;
   Eigen::MatrixX3d x_, trial_, fv_;
   BonePoses poses_, trial_poses_;
-  Eigen::VectorXd gs_, gb_, ds_, db_, y_;
-  Eigen::MatrixXd Hsb_, Wsb_, Hbb_;
-  Pcg<Eigen::VectorXd> pcg_;
+  Eigen::VectorXd gs_, gb_, ds_, db_;
   double E_ = 0, E0_ = 0, gn_ = 0, g0_ = 0, last_step_ = 0;
   bool last_exact_ok_ = true, last_exact_ = false;
   int assembled_ = -1;  // the kind of Hessian in values_ this direction: -1 none, 0 filtered, 1 exact
-  bool lagged_indefinite_ = false;  // the last lagged PCG met p^T H p <= 0
-  std::vector<NeutralMode> neutral_, last_neutral_;  // of the current / last step
-  Eigen::MatrixXd last_S_;
-  BonePoses last_S_poses_;
+  std::vector<NeutralMode> last_neutral_;  // of the last step
+  StepSolver step_;  // after the members it reads
 };
 
 SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initial) {

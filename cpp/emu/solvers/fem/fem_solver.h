@@ -81,6 +81,7 @@ class FemSolver {
 
  private:
   class NewtonProblem;  // one solve's problem, as the Newton driver minimises it (fem_solver.cpp)
+  class StepSolver;     // the linear algebra of its steps (step_solver.h)
   friend struct FemSolverTesting;  // the pieces one at a time, for tests (fem_solver_testing.h)
   /// The free rows of the gradient (3 #free) at x; fills the corner forces that vertex_forces reads.
   void free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x, const Eigen::VectorXd& act,
