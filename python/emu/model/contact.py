@@ -317,6 +317,18 @@ def _patches(allowed: np.ndarray, present: np.ndarray):
     return patch
 
 
+def contact_settings(names, pairs, self_contact: bool, distance, stiffness) -> ContactSettings:
+    """Scene.enable_contact's settings, checked (names: the scene's parts)."""
+    if pairs is not None:
+        pairs = check_pairs(names, pairs, self_contact, "enable_contact")
+    for name, v in (("distance", distance), ("stiffness", stiffness)):
+        if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+            raise ValueError(f"enable_contact: {name} must be a positive number, got {v!r}")
+    return ContactSettings(pairs=pairs, self_contact=bool(self_contact),
+                           distance=None if distance is None else float(distance),
+                           stiffness=None if stiffness is None else float(stiffness))
+
+
 def check_pairs(names, pairs, self_contact: bool, where: str) -> list:
     """The pairs [(part, part)] as tuples; ValueError (prefixed ``where``) for a
     pair that is not two of ``names``, or a self pair without self_contact."""

@@ -7,13 +7,12 @@ import warnings
 
 import numpy as np
 
-from ..core.checks import check_mesh, integer_ids
-from .contact import ContactSettings, check_pairs
-from ..core.fibers import attachment_fibers, attachments, laplace_fibers
-from ..core.geometry import tet_vertices
+from ..core.checks import check_mesh
+from .contact import ContactSettings, contact_settings
+from ..core.fibers import attachment_fibers, attachments
 from .joints import declare_joint, detect_joints
-from . import scene_checks
-from .parts import BONE_ACAP_WEIGHT, Part, default_tendon_weight, lame
+from . import scene_checks, tendons
+from .parts import BONE_ACAP_WEIGHT, Part, default_tendon_weight, lame, muscle_fibers, part_tet_ids
 
 __all__ = ["Scene", "Part", "lame", "MeshWarning"]
 
@@ -50,27 +49,7 @@ class Scene:
 
     # ----------------------------------------------------------------- parts
     def _tet_ids(self, name, tets) -> np.ndarray:
-        idx = np.asarray(tets)
-        if idx.dtype == bool:
-            if idx.shape != (len(self.tets),):
-                raise ValueError(f"part '{name}': a boolean tet mask must have shape ({len(self.tets)},), "
-                                 f"got {idx.shape}")
-            idx = np.flatnonzero(idx)
-        idx = integer_ids(idx, f"part '{name}': tet ids").ravel()
-        if idx.size == 0:
-            raise ValueError(f"part '{name}' has no tets")
-        if idx.min() < 0 or idx.max() >= len(self.tets):
-            raise ValueError(f"part '{name}': tet ids must lie in [0, {len(self.tets)}), got "
-                             f"[{idx.min()}, {idx.max()}]")
-        if len(np.unique(idx)) != len(idx):
-            raise ValueError(f"part '{name}' lists some tets twice")
-        taken = self._owner[idx] >= 0
-        if taken.any():
-            other = list(self.parts)[self._owner[idx[taken][0]]]
-            raise ValueError(f"part '{name}': {taken.sum()} tet(s) already belong to part '{other}'")
-        if name in self.parts:
-            raise ValueError(f"a part named '{name}' exists already")
-        return idx
+        return part_tet_ids(name, tets, self._owner, list(self.parts))
 
     def _add(self, part: Part):
         self._owner[part.tets] = len(self.parts)
@@ -93,28 +72,8 @@ class Scene:
         lame(youngs, poisson)
         if not max_activation > 0:
             raise ValueError(f"muscle '{name}': max_activation must be positive")
-        if fibers is None:
-            if (origin is None) != (insertion is None):
-                raise ValueError(f"muscle '{name}': give both origin and insertion vertex ids, or neither")
-            f = None
-            if origin is not None:
-                try:
-                    f = laplace_fibers(self.points, self.tets[idx], origin, insertion)
-                except ValueError as e:
-                    raise ValueError(f"muscle '{name}': {e}") from None
-            return self._add(Part(name, "muscle", idx, youngs, poisson, density, acap_weight, f, max_activation))
-        f = np.asarray(fibers, dtype=np.float64)
-        if f.shape == (3,):
-            f = np.tile(f, (len(idx), 1))
-        if f.shape != (len(idx), 3):
-            raise ValueError(f"muscle '{name}': fibers must have shape ({len(idx)}, 3) or (3,), got {f.shape}")
-        if not np.all(np.isfinite(f)):
-            raise ValueError(f"muscle '{name}': fibers contain NaN or inf")
-        norm = np.linalg.norm(f, axis=1)
-        if np.any(norm < 1e-12):
-            raise ValueError(f"muscle '{name}': {np.sum(norm < 1e-12)} fibre direction(s) are zero")
-        return self._add(Part(name, "muscle", idx, youngs, poisson, density, acap_weight, f / norm[:, None],
-                              max_activation))
+        f = muscle_fibers(self.points, self.tets[idx], name, fibers, origin, insertion)
+        return self._add(Part(name, "muscle", idx, youngs, poisson, density, acap_weight, f, max_activation))
 
     def add_tendon(self, name: str, tets, *, youngs: float = 4.5e8, poisson: float = 0.49,
                    density: float = 1100.0, acap_weight: float | None = None) -> Part:
@@ -166,15 +125,7 @@ class Scene:
         vertices with the muscle shares vertices with a bone: the muscle's
         attachments through its tendons (emu mesh's tendon_length puts them
         there)."""
-        p = self._part(muscle, "muscle")
-        mine = tet_vertices(self.tets[p.tets], len(self.points))
-        out = {}
-        for t in self.parts.values():
-            if t.kind != "tendon" or not np.intersect1d(tet_vertices(self.tets[t.tets], len(self.points)), mine).size:
-                continue
-            for bone, ids in attachments(self.tets, t.tets, self.bone_tets()).items():
-                out.setdefault(bone, (t.name, ids))
-        return out
+        return tendons.tendon_attachments(self, muscle)
 
     def bone_tets(self) -> dict:
         """{bone name: tet ids} in the scene's order."""
@@ -217,27 +168,8 @@ class Scene:
         """Move the muscle's tets whose centroid lies within ``distance`` of one of
         its bone attachments into a new tendon part (default name "<muscle>_tendon");
         tendon_options go to add_tendon (youngs, poisson, density, acap_weight)."""
+        near = tendons.tets_near_attachments(self, muscle, distance)
         p = self._part(muscle, "muscle")
-        if not distance > 0:
-            raise ValueError(f"split_tendons: distance must be positive, got {distance}")
-        att = self.attachments(muscle)
-        if not att:
-            raise ValueError(f"muscle '{muscle}' shares no vertex with a bone: there is no attachment to "
-                             "measure from; label the tendon tets yourself (add_tendon)")
-        if p.fibers is None and len(att) == 2:
-            # fibres run between the bone attachments, which the split hides behind the tendons
-            p.fibers = attachment_fibers(self.points, self.tets, p.name, p.tets, att)
-        anchor = self.points[np.unique(np.concatenate(list(att.values())))]
-        c = self.points[self.tets[p.tets]].mean(axis=1)
-        near = np.zeros(len(c), bool)
-        for i in range(0, len(c), 4096):  # chunked: (chunk x attachments) distances
-            d2 = ((c[i:i + 4096, None, :] - anchor[None, :, :]) ** 2).sum(axis=2)
-            near[i:i + 4096] = d2.min(axis=1) <= distance * distance
-        if near.all():
-            raise ValueError(f"split_tendons: every tet of '{muscle}' lies within {distance} of an attachment; "
-                             "use a smaller distance")
-        if not near.any():
-            raise ValueError(f"split_tendons: no tet of '{muscle}' lies within {distance} of an attachment")
         tendon_tets = p.tets[near]
         self._owner[tendon_tets] = -1
         p.tets = p.tets[~near]
@@ -256,16 +188,7 @@ class Scene:
     # ------------------------------------------------------ boundary conditions
     def pin(self, vertex_ids, positions=None):
         """Fix vertices at their rest positions (or at ``positions``, (k, 3))."""
-        ids = integer_ids(vertex_ids, "pin: vertex ids").ravel()
-        if ids.size == 0:
-            raise ValueError("pin: no vertex ids given")
-        if ids.min() < 0 or ids.max() >= len(self.points):
-            raise ValueError(f"pin: vertex ids must lie in [0, {len(self.points)}), got [{ids.min()}, {ids.max()}]")
-        pos = self.points[ids] if positions is None else np.asarray(positions, dtype=np.float64)
-        if pos.shape != (len(ids), 3):
-            raise ValueError(f"pin: positions must have shape ({len(ids)}, 3), got {pos.shape}")
-        if not np.all(np.isfinite(pos)):
-            raise ValueError("pin: positions contain NaN or inf")
+        ids, pos = scene_checks.pin_targets(self.points, vertex_ids, positions)
         targets = dict(zip(self.pinned.tolist(), self.pin_targets))
         targets.update(zip(ids.tolist(), pos))
         self.pinned = np.array(sorted(targets), dtype=np.int64)
@@ -286,15 +209,7 @@ class Scene:
         Scenes without it build nothing for contact. Returns the settings
         (also ``scene.contact``; ``scene.contact = None`` switches it off).
         """
-        if pairs is not None:
-            pairs = check_pairs(list(self.parts), pairs, self_contact, "enable_contact")
-        for name, v in (("distance", distance), ("stiffness", stiffness)):
-            if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise ValueError(f"enable_contact: {name} must be a positive number, got {v!r}")
-        self.contact = ContactSettings(pairs=pairs,
-                                       self_contact=bool(self_contact),
-                                       distance=None if distance is None else float(distance),
-                                       stiffness=None if stiffness is None else float(stiffness))
+        self.contact = contact_settings(list(self.parts), pairs, self_contact, distance, stiffness)
         return self.contact
 
     # ------------------------------------------------------------ model build

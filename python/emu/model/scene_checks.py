@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.checks import check_anchored, check_movable_bones
+from ..core.checks import check_anchored, check_movable_bones, integer_ids
 from ..core.checks import loose_contacts as _loose_contacts
 from ..core.geometry import tet_vertices
 from .joints import check_declared_joints, detect_joints
 
-__all__ = ["validate", "cracks", "loose_contacts"]
+__all__ = ["validate", "cracks", "loose_contacts", "pin_targets"]
 
 
 def _parts_of_vertices(scene, ids) -> list:
@@ -79,3 +79,19 @@ def loose_contacts(scene):
     if not soft or not bones:
         return []
     return _loose_contacts(scene.points, scene.tets, soft, bones, shared_ok=scene.mesh_report.coincident)
+
+
+def pin_targets(points, vertex_ids, positions=None) -> tuple:
+    """(ids, (k, 3) targets) of Scene.pin, checked: ids in range, targets the
+    rest positions or finite ``positions`` of shape (k, 3)."""
+    ids = integer_ids(vertex_ids, "pin: vertex ids").ravel()
+    if ids.size == 0:
+        raise ValueError("pin: no vertex ids given")
+    if ids.min() < 0 or ids.max() >= len(points):
+        raise ValueError(f"pin: vertex ids must lie in [0, {len(points)}), got [{ids.min()}, {ids.max()}]")
+    pos = points[ids] if positions is None else np.asarray(positions, dtype=np.float64)
+    if pos.shape != (len(ids), 3):
+        raise ValueError(f"pin: positions must have shape ({len(ids)}, 3), got {pos.shape}")
+    if not np.all(np.isfinite(pos)):
+        raise ValueError("pin: positions contain NaN or inf")
+    return ids, pos
