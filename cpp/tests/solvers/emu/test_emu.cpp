@@ -429,5 +429,94 @@ TEST(bone_coarse_space_matches_the_dense_balancing_preconditioner) {
   }
 }
 
+namespace {
+// F near rest (#unknowns by 9 rows, vec(F) column-major), the bones' F's rotations.
+Eigen::MatrixXd near_rest_unknowns(const UnknownLayout& d, std::mt19937& rng, double spread) {
+  std::normal_distribution<double> n(0.0, spread);
+  Eigen::MatrixXd F(d.num_unknowns, 9);
+  for (int u = 0; u < d.num_unknowns; ++u) {
+    Mat3 G = Mat3::Identity();
+    for (int i = 0; i < 9; ++i) G.data()[i] += n(rng);
+    if (u >= d.num_soft) G = nearest_rotation(G);
+    F.row(u) = Eigen::Map<const Eigen::Matrix<double, 1, 9>>(G.data());
+  }
+  return F;
+}
+
+EmuSolver emu_with(const Model& m, EmuPreconditioner pc) {
+  EmuSolverOptions eo;
+  eo.alpha = 50 * m.mu(0);
+  eo.preconditioner = pc;
+  return EmuSolver(m, SolverOptions{}, eo);
+}
+}  // namespace
+
+// The fit is linear in F (the bones' affine maps are unknowns of it, their
+// joints homogeneous rows): x*(F + D) - x*(F) is the homogeneous fit of D,
+// which the directions' fits (fit_jacobian.h) compute.
+TEST(fit_of_a_direction_is_the_fits_difference) {
+  int soft_rigid = -1;
+  for (const Model& m : {bar(2, 3), bar_with_two_bones(soft_rigid)}) {
+    const UnknownLayout d(m);
+    const EmuSolver emu = emu_with(m, EmuPreconditioner::ConstantSchur);
+    std::mt19937 rng(11);
+    const Eigen::MatrixXd F = near_rest_unknowns(d, rng, 0.2), D = near_rest_unknowns(d, rng, 0.3) - F;
+    const LoadCase l = bar_load(0.0);
+    const Eigen::MatrixX3d diff = EmuSolverTesting::fit_positions(emu, l, F + D) - EmuSolverTesting::fit_positions(emu, l, F);
+    Mat9X Dc = D.transpose(), Fd;
+    Eigen::MatrixX3d dx;
+    EmuSolverTesting::fit_linear_into(emu, Dc, dx, Fd);
+    for (Eigen::Index v = 0; v < m.rest.rows(); ++v)
+      if (d.free_index(v) >= 0 || d.vertex_bone(v) >= 0) CHECK((dx.row(v) - diff.row(v)).norm() <= 1e-10 * diff.norm());
+    CHECK(diff.norm() > 1e-3);
+  }
+}
+
+// The Schur-complement preconditioner is the exact inverse of the filtered
+// Hessian H = A - alpha C^T K_c^-1 C (schur_preconditioner.h); it takes no
+// movable bones, and says so.
+TEST(schur_preconditioner_inverts_the_filtered_hessian) {
+  int soft_rigid = -1;
+  bool refused = false;
+  try {
+    emu_with(bar_with_two_bones(soft_rigid), EmuPreconditioner::Schur);
+  } catch (const std::invalid_argument& e) {
+    refused = std::string(e.what()).find("woodbury") != std::string::npos;
+  }
+  CHECK(refused);
+  for (const Model& m : {bar(1, 3), bar(2, 2)}) {
+    const UnknownLayout d(m);
+    EmuSolver emu = emu_with(m, EmuPreconditioner::Schur);
+    std::mt19937 rng(5);
+    const Eigen::MatrixXd F = near_rest_unknowns(d, rng, 0.1), R = Eigen::MatrixXd::Random(d.num_unknowns, 9);
+    const LoadCase l = bar_load(2e4);
+    const Eigen::MatrixXd Y = EmuSolverTesting::schur_solve(emu, l, F, R);
+    CHECK((EmuSolverTesting::hessian_product(emu, l, F, Y) - R).norm() <= 1e-8 * R.norm());
+  }
+}
+
+// The constant Schur preconditioner (constant_schur.h) approximates H^-1: it
+// must be symmetric and positive definite for CG, with bones too.
+TEST(constant_schur_preconditioner_is_symmetric_and_positive) {
+  int soft_rigid = -1;
+  for (const Model& m : {bar(2, 3), bar_with_two_bones(soft_rigid)}) {
+    const UnknownLayout d(m);
+    EmuSolver emu = emu_with(m, EmuPreconditioner::ConstantSchur);
+    std::mt19937 rng(6);
+    const Eigen::MatrixXd F = near_rest_unknowns(d, rng, 0.1);
+    const Eigen::MatrixXd U = Eigen::MatrixXd::Random(d.num_unknowns, 9), V = Eigen::MatrixXd::Random(d.num_unknowns, 9);
+    const LoadCase l = bar_load(2e4);
+    const Eigen::MatrixXd MU = EmuSolverTesting::constant_schur_solve(emu, l, F, U);
+    const Eigen::MatrixXd MV = EmuSolverTesting::constant_schur_solve(emu, l, F, V);
+    const double uMv = (U.array() * MV.array()).sum(), vMu = (V.array() * MU.array()).sum();
+    CHECK_CLOSE(uMv, vMu, 1e-10 * MU.norm() * V.norm());
+    CHECK((U.array() * MU.array()).sum() > 0 && (V.array() * MV.array()).sum() > 0);
+    // not the identity nor the exact inverse, but close to H^-1 on a smooth field: M H v ~ v
+    const Eigen::MatrixXd HU = EmuSolverTesting::hessian_product(emu, l, F, U);
+    const Eigen::MatrixXd MHU = EmuSolverTesting::constant_schur_solve(emu, l, F, HU);
+    CHECK((MHU - U).norm() < U.norm());
+  }
+}
+
 
 TEST_MAIN()
