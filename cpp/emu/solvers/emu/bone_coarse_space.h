@@ -11,8 +11,11 @@
 //   M^-1 r = Q r + (I - Q H) B (I - H Q) r,   Q = Z (Z^T H Z)^-1 Z^T,
 // with B the base (Woodbury, tangent-projected) inverse, rebuilt every Newton
 // step with the Hessian CG uses (3 Hessian products per bone, their fits
-// from the unit turn's: no back-substitution without contact; H Z is kept, so an application
-// costs one B and a few passes over H Z and the bones' shared fields, below).
+// from the unit turn's: no back-substitution without contact). Q works in the
+// coarse coordinates Zc = Z Tc (the bones' turns, or in joint coordinates the
+// turn map's combinations of them, then the extra directions): H Zc is kept,
+// so an application costs one B and a few passes over H Zc, the extra
+// columns and the bones' shared fields, below.
 // A bone's three turns share one field: turn k of bone b is M_bk Phi_b
 // (M_bk = [e_k]_x F_b; Phi_b: the unit turn's F_t on the soft unknowns,
 // `follow`, the identity on b's own unknown, zero on the other bones), so Z
