@@ -165,13 +165,13 @@ class AccuracyMode:
             t1 = time.perf_counter()
             corrected, closer = self.correct(port, sol) if self.fem_correction else (False, None)
             estimate_s += time.perf_counter() - t1   # the corrections count as estimation time
-            # where x1 overshot, the next alpha comes from EMU's distance to x3
-            factor = self.raise_factor(own if closer is None else closer)
             if corrected:
-                # the next solve (a sequence's next frame) starts at the alpha a
-                # re-solve would have used, so that EMU's own answers stay near
-                # the target and corrections the exception
-                port.set_alpha(alpha_start if stalled else port.alpha * factor)
+                # the next solve (a sequence's next frame) starts at the alpha this
+                # one started at: a certified correction costs a few PCG steps on
+                # the estimator's factor, a raised alpha costs CG on every later
+                # frame, and where a bone's turn sets EMU's error it falls slowly
+                # with alpha (docs/DESIGN.md, "Accuracy mode: FEM-corrected answers")
+                port.set_alpha(alpha_start)
                 if sol.iterates is not None:   # the corrected answer: after the estimates
                     sol.iterates.append((port.elapsed(), sol.positions))
                 break
@@ -180,7 +180,8 @@ class AccuracyMode:
                     port.set_alpha(alpha_start)
                 break
             before, stalled = own, False
-            port.set_alpha(port.alpha * factor)
+            # where x1 overshot, the next alpha comes from EMU's distance to x3
+            port.set_alpha(port.alpha * self.raise_factor(own if closer is None else closer))
             highest = port.alpha
             x1 = sol.fem_correction
             if x1 is not None and not port.has_contact:
