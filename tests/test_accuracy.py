@@ -47,8 +47,8 @@ def test_emu_answer_is_corrected_by_fem_where_its_estimate_misses():
     EMU's answer corrected by two FEM Newton steps (they contract) instead of
     re-solving: one EMU solve, alpha unchanged (and the next solve starts
     there: a correction is cheaper than the CG a raised alpha costs every
-    later frame), within the target, and the estimate (the last step's
-    length) at least the true error; EMU's own answer and its F are kept."""
+    later frame), within the target, and the estimate (the lengths of FEM's
+    steps from the answer) within [0.5, 2] of the true error; EMU's own answer and its F are kept."""
     s = fusiform(2, warn=False)
     fem = emu.solve(s, {"belly": 5e4}, "fem", rtol_grad=1e-9)
     solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005)
@@ -59,7 +59,7 @@ def test_emu_answer_is_corrected_by_fem_where_its_estimate_misses():
     assert emu.vertex_error(sol.emu_positions, fem) > 0.005           # EMU's own answer misses
     assert emu.vertex_error(sol.emu_positions, sol.fem_correction) > 0.6 * 0.005   # and its estimate says so
     err = emu.vertex_error(sol, fem)
-    assert err <= 0.005 and sol.error_estimate <= 0.6 * 0.005 and err <= sol.error_estimate
+    assert err <= 0.005 and sol.error_estimate <= 0.6 * 0.005 and 0.5 * err <= sol.error_estimate <= 2 * err
     assert "corrected" in sol.summary() and "corrected" in sol.error_estimate_note
     # F is EMU's: its fit is emu_positions, and it warm-starts the next solve
     assert sol.F.shape == (len(s.tets), 3, 3)
@@ -67,6 +67,29 @@ def test_emu_answer_is_corrected_by_fem_where_its_estimate_misses():
     assert again.converged and emu.vertex_error(again, fem) <= 0.005
     plain = emu.Solver(s, "emu", alpha=100.0).solve({"belly": 5e4})
     assert not plain.corrected and plain.positions is plain.emu_positions
+
+
+def test_a_correction_whose_contraction_does_not_last_is_settled(monkeypatch):
+    """The fusiform of the test above, its correction's x4 step (0.16 of |x2 -
+    x1|) taken as not lasting (CORRECTION_LASTS below it, as where FEM's steps
+    alternate along a chain's soft turn): the estimate is not certified, the
+    answer is settled by a FEM solve from x4 (within the accuracy of strict
+    FEM, its estimate within [0.5, 2] of the truth or a bound) in the same
+    single EMU solve, and the next solve's alpha is not carried down."""
+    s = fusiform(2, warn=False)
+    fem = emu.solve(s, {"belly": 5e4}, "fem", rtol_grad=1e-9)
+    kept = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005).solve({"belly": 5e4})
+    assert kept.corrected and kept.error_estimate_certified and "corrected by" in kept.error_estimate_note
+    monkeypatch.setattr(sys.modules["emu.solve.accuracy"], "CORRECTION_LASTS", 0.05)
+    solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.005)
+    with pytest.warns(emu.AccuracyWarning, match="could not certify itself"):
+        sol = solver.solve({"belly": 5e4})
+    assert sol.converged and sol.corrected and sol.error_estimate_certified is False
+    assert sol.settings["alpha_attempts"] == 1 and len(sol.fem_steps) == 4
+    assert "settled by a FEM solve" in sol.error_estimate_note and sol.accuracy_reached
+    true = emu.vertex_error(sol, fem)
+    assert true <= 0.005 and sol.error_estimate >= 0.5 * true
+    assert solver.alpha >= 100.0
 
 
 def test_an_estimate_that_does_not_certify_itself_is_settled_by_fem(monkeypatch):
@@ -116,7 +139,10 @@ def test_an_estimate_that_does_not_certify_itself_is_settled_by_fem(monkeypatch)
 def test_correct_on_synthetic_corrections():
     """AccuracyMode.correct's rule on set FEM corrections (a stand-in estimator
     moving one vertex along x by the given fractions of the diagonal): the
-    corrections contract -> corrected, positions x2, estimate |x2 - x1|; x1
+    corrections contract and a third step stays within half of |x2 - x1| ->
+    corrected, positions x2, estimate |x3 - x2| + |x4 - x3|; a third step longer than that
+    (the steps alternate, as along a chain's soft turn) -> not corrected, the
+    estimate not certified and the last point kept for the settle; x1
     overshot (the second step 0.33 of the first) and the third contracts ->
     not corrected, |x - x3| returned for the next alpha; steps that neither
     contract nor get under STEP_FRACTION x target within MAX_CORRECTIONS, or
@@ -153,10 +179,14 @@ def test_correct_on_synthetic_corrections():
         port = SolvePort(solver, load, time.perf_counter())
         return solver._accuracy.correct(port, trial), trial, solver._estimator.fem.calls
 
-    (ok, closer), trial, calls = run(0.008, {0.008: 0.0085, 0.0085: 0.0086})
-    assert ok and closer is None and trial.corrected and calls == 2
-    assert np.array_equal(trial.positions, at(0.0085))
-    assert trial.error_estimate == emu.vertex_error(at(0.008), at(0.0085))
+    (ok, closer), trial, calls = run(0.008, {0.008: 0.0086, 0.0086: 0.00875, 0.00875: 0.0088})
+    assert ok and closer is None and trial.corrected and calls == 3
+    assert np.array_equal(trial.positions, at(0.0086))
+    assert trial.error_estimate == emu.vertex_error(at(0.0086), at(0.00875)) + emu.vertex_error(at(0.00875), at(0.0088))
+    (ok, closer), trial, calls = run(0.008, {0.008: 0.0086, 0.0086: 0.00875, 0.00875: 0.0078})
+    assert not ok and closer is None and not trial.corrected and calls == 3
+    assert trial.error_estimate_certified is False and np.array_equal(trial.fem_steps[-1], at(0.0078))
+    assert trial.positions is x
     (ok, closer), trial, _ = run(0.012, {0.012: 0.008, 0.008: 0.0085})
     assert not ok and closer == emu.vertex_error(x, at(0.0085)) and not trial.corrected
     assert trial.positions is x and trial.error_estimate == emu.vertex_error(x, at(0.012))

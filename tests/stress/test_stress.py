@@ -37,7 +37,11 @@ def bone_rigidity_tolerance(scene, part, method):
 def assert_physical(scene, sol, method, label):
     assert np.all(np.isfinite(sol.positions)), label
     energies = np.asarray(sol.history["energy"])
-    assert np.all(np.isfinite(energies)) and energies[-1] <= energies[0] + 1e-12 * abs(energies[0]), label
+    assert np.all(np.isfinite(energies)), label
+    # one block per solve of the frame (accuracy mode's re-solves at another alpha: another energy)
+    starts = np.flatnonzero(np.asarray(sol.history["iteration"]) == 0).tolist() + [len(energies)]
+    for a, b in zip(starts, starts[1:]):
+        assert energies[b - 1] <= energies[a] + 1e-12 * abs(energies[a]), (label, a)
     assert sol.inverted_tets == len(emu.inverted_tets(scene.tets, sol.positions))
     diag = np.ptp(scene.points, axis=0).max()
     assert np.allclose(sol.positions[scene.pinned], scene.points[scene.pinned], atol=1e-12 * diag), label

@@ -44,11 +44,12 @@ ACCEPT, AIM, STEP_FRACTION, MAX_ALPHA_ATTEMPTS = 0.6, 0.4, 0.1, 5
 ACCURACY_CG_FORCING = 0.01
 # FEM-corrected answers: the corrections x2 of x1 and x3 of x2 contract,
 # |x2 - x1| <= CORRECTION_CONTRACTION |x1 - x| (and within ACCEPT x target)
-# and |x3 - x2| <= CORRECTION_CONTRACTION |x2 - x1|; or, within
+# and |x3 - x2| <= CORRECTION_CONTRACTION |x2 - x1|, and x4's step stays
+# within CORRECTION_LASTS |x2 - x1| (else the estimate is not certified: settled); or, within
 # MAX_CORRECTIONS corrections, one moves no vertex by more than STEP_FRACTION
 # x target (FEM's own accuracy stop, for corrections that do not contract
 # twice in a row).
-CORRECTION_CONTRACTION, MAX_CORRECTIONS = 0.3, 4
+CORRECTION_CONTRACTION, MAX_CORRECTIONS, CORRECTION_LASTS = 0.3, 4, 0.5
 # The error estimate |y - x| (y: FEM Newton steps from EMU's answer x, the
 # first x1 on a factorisation, up to CERTIFY_STEPS more by PCG on it) is
 # certified where every step after x1 is at most CERTIFY_CONTRACTION of the
@@ -165,12 +166,11 @@ class AccuracyMode:
             t1 = time.perf_counter()
             corrected, closer = self.correct(port, sol) if self.fem_correction else (False, None)
             estimate_s += time.perf_counter() - t1   # the corrections count as estimation time
+            if sol.error_estimate_certified is False and self.fem_correction:
+                break   # settled below
             if corrected:
-                # the next solve (a sequence's next frame) starts at the alpha this
-                # one started at: a certified correction costs a few PCG steps on
-                # the estimator's factor, a raised alpha costs CG on every later
-                # frame, and where a bone's turn sets EMU's error it falls slowly
-                # with alpha (docs/DESIGN.md, "Accuracy mode: FEM-corrected answers")
+                # the next solve starts at this one's alpha: a correction costs less than a
+                # raised alpha's CG on every later frame (DESIGN, "Accuracy mode: FEM-corrected answers")
                 port.set_alpha(alpha_start)
                 if sol.iterates is not None:   # the corrected answer: after the estimates
                     sol.iterates.append((port.elapsed(), sol.positions))
@@ -280,13 +280,41 @@ class AccuracyMode:
         if sol.converged:   # a solve that stopped early says so in its status already
             warnings.warn(AccuracyWarning(sol.error_estimate_note), stacklevel=4)
 
+    def _verdict(self, steps, own) -> tuple:
+        """What FEM's correction steps so far say (steps: |x2 - x1|, |x3 - x2|,
+        ...; own: |x1 - x|): ("answer", k, estimate) the answer is point k (x1 is
+        0); ("overshot",) x1 overshot but x3 contracts; ("not certified",) the
+        contraction did not last; ("more",) another step decides."""
+        tenth = 0.1 * STEP_FRACTION * self.target   # the certificate's early exit
+        if len(steps) >= 2 and steps[1] <= CORRECTION_CONTRACTION * steps[0]:
+            if steps[0] > CORRECTION_CONTRACTION * own:
+                return ("overshot",)
+            # x2, estimated by the way FEM's steps still go from it, where x4's step
+            # stays within CORRECTION_LASTS of |x2 - x1|: along a chain's soft turn
+            # the steps alternate long and short, the third longer than the first
+            if steps[1] <= tenth:
+                return ("answer", 1, 2 * steps[1])
+            if len(steps) >= 3:
+                if steps[2] <= max(CORRECTION_LASTS * steps[0], tenth):
+                    return ("answer", 1, steps[1] + steps[2])
+                return ("not certified",)
+        elif len(steps) >= 2 and steps[-1] <= STEP_FRACTION * self.target:
+            return ("answer", len(steps), steps[-2] + steps[-1])   # FEM's own accuracy stop
+        return ("more",)
+
     def correct(self, port: AccuracyPort, sol) -> tuple:
         """EMU's estimate above ACCEPT x target: FEM Newton corrections from the
         estimate's x1 (x2 of x1, x3 of x2, ... at most MAX_CORRECTIONS), each
         certified or not as FEM's own solves are:
         - the corrections contract (|x2 - x1| <= CORRECTION_CONTRACTION |x1 - x|,
           within ACCEPT x target, and |x3 - x2| <= CORRECTION_CONTRACTION |x2 -
-          x1|: FEM's Newton in its fast regime): x2, with |x2 - x1| as its estimate;
+          x1|: FEM's Newton in its fast regime) and the next step |x4 - x3|
+          stays within half of |x2 - x1| (none asked where |x3 - x2| is within
+          a tenth of FEM's accuracy stop): x2, estimated |x3 - x2| + |x4 - x3|
+          (2 |x3 - x2| without x4). Where x4's step is longer, the contraction
+          did not last (along a chain's soft turn FEM's steps alternate long and
+          short): the estimate is marked not certified, fem_steps extended to
+          x4, and (False, None) returned; the caller settles the answer;
         - or a correction moves no vertex by more than STEP_FRACTION x target
           (FEM's accuracy-mode stop): that correction's result, with its last two
           steps' lengths summed as its estimate (a bound: the steps need not
@@ -311,14 +339,15 @@ class AccuracyMode:
         if not (steps[0] < own and steps[0] <= ACCEPT * target):
             return False, None
         while True:
-            if len(steps) == 2 and steps[1] <= CORRECTION_CONTRACTION * steps[0]:
-                if steps[0] > CORRECTION_CONTRACTION * own:   # x1 overshot: EMU's answer is not corrected
-                    return False, vertex_error(x, points[2])
-                answer, estimate = points[1], steps[0]
+            verdict = self._verdict(steps, own)
+            if verdict[0] == "answer":
+                answer, estimate = points[verdict[1]], verdict[2]
                 break
-            if len(steps) >= 2 and steps[-1] <= STEP_FRACTION * target:
-                answer, estimate = points[-1], steps[-2] + steps[-1]
-                break
+            if verdict[0] == "overshot":   # EMU's answer is not corrected
+                return False, vertex_error(x, points[2])
+            if verdict[0] == "not certified":   # settled from the last point by the caller
+                sol.error_estimate_certified, sol.fem_steps = False, points
+                return False, None
             if len(steps) >= MAX_CORRECTIONS:
                 return False, None
             y = port.correction(points[-1])
