@@ -139,7 +139,7 @@ def test_an_estimate_that_does_not_certify_itself_is_settled_by_fem(monkeypatch)
 def test_correct_on_synthetic_corrections():
     """AccuracyMode.correct's rule on set FEM corrections (a stand-in estimator
     moving one vertex along x by the given fractions of the diagonal): the
-    corrections contract and a third step stays within half of |x2 - x1| ->
+    corrections contract and a third step is no longer than |x2 - x1| ->
     corrected, positions x2, estimate |x3 - x2| + |x4 - x3|; a third step longer than that
     (the steps alternate, as along a chain's soft turn) -> not corrected, the
     estimate not certified and the last point kept for the settle; x1

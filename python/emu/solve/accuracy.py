@@ -45,11 +45,11 @@ ACCURACY_CG_FORCING = 0.01
 # FEM-corrected answers: the corrections x2 of x1 and x3 of x2 contract,
 # |x2 - x1| <= CORRECTION_CONTRACTION |x1 - x| (and within ACCEPT x target)
 # and |x3 - x2| <= CORRECTION_CONTRACTION |x2 - x1|, and x4's step stays
-# within CORRECTION_LASTS |x2 - x1| (else the estimate is not certified: settled); or, within
+# no longer than |x2 - x1| (else the estimate is not certified: settled); or, within
 # MAX_CORRECTIONS corrections, one moves no vertex by more than STEP_FRACTION
 # x target (FEM's own accuracy stop, for corrections that do not contract
 # twice in a row).
-CORRECTION_CONTRACTION, MAX_CORRECTIONS, CORRECTION_LASTS = 0.3, 4, 0.5
+CORRECTION_CONTRACTION, MAX_CORRECTIONS, CORRECTION_LASTS = 0.3, 4, 1.0
 # The error estimate |y - x| (y: FEM Newton steps from EMU's answer x, the
 # first x1 on a factorisation, up to CERTIFY_STEPS more by PCG on it) is
 # certified where every step after x1 is at most CERTIFY_CONTRACTION of the
@@ -290,7 +290,7 @@ class AccuracyMode:
             if steps[0] > CORRECTION_CONTRACTION * own:
                 return ("overshot",)
             # x2, estimated by the way FEM's steps still go from it, where x4's step
-            # stays within CORRECTION_LASTS of |x2 - x1|: along a chain's soft turn
+            # is no longer than |x2 - x1| (CORRECTION_LASTS): along a chain's soft turn
             # the steps alternate long and short, the third longer than the first
             if steps[1] <= tenth:
                 return ("answer", 1, 2 * steps[1])
@@ -309,7 +309,7 @@ class AccuracyMode:
         - the corrections contract (|x2 - x1| <= CORRECTION_CONTRACTION |x1 - x|,
           within ACCEPT x target, and |x3 - x2| <= CORRECTION_CONTRACTION |x2 -
           x1|: FEM's Newton in its fast regime) and the next step |x4 - x3|
-          stays within half of |x2 - x1| (none asked where |x3 - x2| is within
+          is no longer than |x2 - x1| (none asked where |x3 - x2| is within
           a tenth of FEM's accuracy stop): x2, estimated |x3 - x2| + |x4 - x3|
           (2 |x3 - x2| without x4). Where x4's step is longer, the contraction
           did not last (along a chain's soft turn FEM's steps alternate long and
