@@ -600,6 +600,32 @@ def test_recycled_directions_change_cg_not_the_answer():
         emu.Solver(s, "emu", recycled_directions=-1)
 
 
+def test_a_stalled_cg_solve_is_cut_and_its_direction_learned():
+    """simple_joint with its bone free: CG is cut at max(30, 2x the step
+    before) iterations (StepSolver::kCgStallMin, kCgStallRatio), where without
+    recycling (no coarse space to learn in: no cut) a step takes more; the
+    solve does not stop on a cut step, and the answer is within the accuracy
+    of strict FEM."""
+    s = emu.io.load_scene(shared_path("simple_joint"), free_bones=["bottom_bone"], warn=False)
+    load = {"muscle": 1e4}
+
+    def steps(sol):   # CG per Newton step of the first solve, and each step's limit
+        it, cg = sol.history["iteration"], sol.history["cg_iterations"]
+        end = next((k for k in range(1, len(it)) if it[k] == 0), len(it))
+        cg = [int(c) for c in cg[1:end]]
+        return cg, [max(30, 2 * b) for b in [0] + cg[:-1]]
+
+    cut = emu.Solver(s, "emu", accuracy=0.01).solve(load)
+    cg, limits = steps(cut)
+    assert all(c <= m for c, m in zip(cg, limits)), (cg, limits)
+    assert any(c == m for c, m in zip(cg, limits)), (cg, limits)   # a step was cut
+    assert cg[-1] < limits[-1] and "step_tol" in cut.status, (cg, cut.status)   # not stopped on a cut step
+    plain_cg, plain_limits = steps(emu.Solver(s, "emu", accuracy=0.01, recycled_directions=0).solve(load))
+    assert any(c > m for c, m in zip(plain_cg, plain_limits)), (plain_cg, plain_limits)
+    strict = emu.Solver(s, "fem", rtol_grad=1e-9).solve(load)
+    assert emu.vertex_error(cut, strict) < 0.01
+
+
 def test_emu_at_rest_with_bones_converges_at_once():
     """No load, the rest pose: an exact equilibrium whose gradient is the fit's
     round-off, lifted by the bones' ACAP weight (1e4) above the scale-based

@@ -187,13 +187,14 @@ bool EmuSolver::StepSolver::step_direction(const Product& product, SearchDirecti
   } else {
     const double eta =
         std::min(o.cg_forcing_max, std::max(o.cg_forcing_min, std::pow(gn_ / g0_, o.cg_forcing_exponent)));
-    const PcgResult cg =
-        pcg_.solve(product, precond, Mat9X(-gR_), eta * gn_, o.cg_max_iterations, d_, o.cg_model_decrease);
+    const int cap = std::min(o.cg_max_iterations, stall_limit());
+    const PcgResult cg = pcg_.solve(product, precond, Mat9X(-gR_), eta * gn_, cap, d_, o.cg_model_decrease);
     dir.cg_iterations = cg.iterations;
     if (cg.negative_curvature) ++dir.filtered;  // exact H is indefinite here: keep what CG had
+    dir.cg_cut = !cg.converged && !cg.negative_curvature && cap < o.cg_max_iterations;
   }
-  if (o.recycled_directions > 0 && bones_ && o.bone_coarse_space && dir.cg_iterations > std::max(50, 4 * last_cg_))
-    recycle(d_);  // only where a coarse space takes them
+  if (learns_modes() && (dir.cg_cut || dir.cg_iterations > std::max(50, 4 * last_cg_)))
+    recycle(d_);
   dir.slope = dot(gR_, d_);
   if (!(dir.slope < 0)) {
     precondition(gR_, d_);
@@ -205,6 +206,23 @@ bool EmuSolver::StepSolver::step_direction(const Product& product, SearchDirecti
     }
   }
   return true;
+}
+
+// With a coarse space that learns (bones, recycled directions), CG is cut where
+// it runs kCgStallRatio x the last step's iterations (at least kCgStallMin):
+// it has met a mode the preconditioner misses, and the iterations after that
+// resolve it slowly (realistic_biceps as a chain: 56 CG in one step of 8, 40%
+// of the solve, the next step 3 CG). The cut step is taken, its direction
+// joins the coarse space, and the next step resolves the mode in it; a cut
+// step is no Newton step, so the step test does not stop on it
+// (docs/DESIGN.md, "The cost of an iteration").
+int EmuSolver::StepSolver::stall_limit() const {
+  if (!learns_modes()) return s_.emu_.cg_max_iterations;
+  return std::max(kCgStallMin, kCgStallRatio * last_cg_);
+}
+
+bool EmuSolver::StepSolver::learns_modes() const {
+  return s_.emu_.recycled_directions > 0 && bones_ && s_.emu_.bone_coarse_space;  // only a coarse space takes them
 }
 
 // A CG solve far longer than the last one met a mode the preconditioner

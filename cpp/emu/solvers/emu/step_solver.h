@@ -21,6 +21,9 @@ namespace emu {
 
 class EmuSolver::StepSolver {
  public:
+  /// CG is cut at max(kCgStallMin, kCgStallRatio x the last step's CG) where
+  /// the coarse space learns modes (step_solver.cpp, stall_limit).
+  static constexpr int kCgStallMin = 30, kCgStallRatio = 2;
   /// The problem's iterate F, its Euclidean and Riemannian gradients g, gR
   /// with |gR| now and at the start (gn, g0), and the direction d it reads:
   /// kept by reference (the problem's members, updated in place).
@@ -47,6 +50,8 @@ class EmuSolver::StepSolver {
   template <class Product>
   bool step_direction(const Product& product, SearchDirection& dir);
   void recycle(const Mat9X& d);
+  bool learns_modes() const;
+  int stall_limit() const;
   void precondition(const Mat9X& in, Mat9X& out) const;
 
   EmuSolver& s_;

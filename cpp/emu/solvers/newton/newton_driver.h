@@ -40,6 +40,7 @@ struct SearchDirection {
   int exact_failed = 0;    // failed factorisations of the exact Hessian
   int factorizations = 0;  // sparse Cholesky factorisations made for it
   int negative_curvature = 0;  // 1 if it includes a negative-curvature direction (FEM at a saddle)
+  bool cg_cut = false;     // CG was cut short where it stalled: not a Newton step, no step test on it
   /// This direction marked as failed (its counters kept for the result).
   SearchDirection& fail(std::string why) {
     ok = false;
@@ -158,7 +159,7 @@ void newton_minimize(Problem& p, const SolverOptions& o, double floor, Clock::ti
       res.status = gn > tol ? "converged: the gradient is at its round-off level" : "converged";
     } else if (o.step_tol > 0 &&
                step_test.passes(o, d.filtered == 0, (p.positions() - x_prev).rowwise().norm().maxCoeff(),
-                                ls.step == 1.0, gn, std::max(conv.g0, cold_g0))) {
+                                ls.step == 1.0 && !d.cg_cut, gn, std::max(conv.g0, cold_g0))) {
       res.converged = true;
       res.status = "converged: a full step moved no vertex by more than step_tol";
     }

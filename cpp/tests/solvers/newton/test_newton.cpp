@@ -26,6 +26,7 @@ struct ConvexProblem {
   double noise = 0;  // amplitude of a rounding-like error in grad: a fresh sample for any change of y
   bool fail_direction_at = false;
   int fail_iteration = -1;
+  bool cut = false;  // every direction reported as cut short (SearchDirection::cg_cut)
   double f(const Eigen::VectorXd& y) const { return y.array().exp().sum() - c.dot(y) + 0.5 * y.dot(Q * y); }
   Eigen::VectorXd grad(const Eigen::VectorXd& y) const {
     Eigen::VectorXd out = Eigen::VectorXd(y.array().exp()) - c + Q * y;
@@ -47,6 +48,7 @@ struct ConvexProblem {
     d = -H.ldlt().solve(g);
     SearchDirection dir;
     dir.slope = g.dot(d);
+    dir.cg_cut = cut;
     return dir;
   }
   double last_s = 0;
@@ -190,6 +192,21 @@ TEST(newton_driver_step_tolerance) {
   SolveResult rq;
   newton_minimize(q, o, 1e-14, Clock::now(), rq);
   CHECK(rq.converged && rq.status == "converged" && rq.iterations == rs.iterations);
+}
+
+TEST(newton_driver_step_tolerance_does_not_stop_on_a_cut_step) {
+  // the same problem and step_tol as above, every direction reported as a CG
+  // solve cut short: no step is a Newton step, so only the gradient test stops
+  ConvexProblem strict = make_problem(6);
+  SolveResult rs;
+  newton_minimize(strict, SolverOptions(), 1e-14, Clock::now(), rs);
+  ConvexProblem p = make_problem(6);
+  p.cut = true;
+  SolverOptions o;
+  o.step_tol = 0.05;
+  SolveResult r;
+  newton_minimize(p, o, 1e-14, Clock::now(), r);
+  CHECK(r.converged && r.status == "converged" && r.iterations == rs.iterations);
 }
 
 TEST(newton_driver_step_tolerance_sees_the_contraction) {
