@@ -35,11 +35,11 @@ struct SolverOptions {
   bool step_tol_cold_scale = false;
   // ... and (when > 0) only once it and the step before it are steps of the
   // exact Hessian (not the PSD-filtered one), each at most step_tol_contraction
-  // of the step before it: the contraction that lets a short step bound the
+  // of the shorter of the two steps before it: the contraction that lets a short step bound the
   // distance left (rate r <= 1/2 leaves at most r / (1 - r) <= 1 step) is seen,
   // not assumed. Along a softly resisted turn Newton's steps stay about as long
-  // for many steps, and one contracting step among them happens by chance
-  // (docs/DESIGN.md, "A short step is evidence only when it is an accurate
+  // for many steps or alternate long and short, and one contracting step among
+  // them happens by chance (docs/DESIGN.md, "A short step is evidence only when it is an accurate
   // Newton step"). FEM's accuracy mode and the settle.
   double step_tol_contraction = 0.0;
   double armijo = 1e-4;        // sufficient-decrease constant

@@ -279,6 +279,17 @@ TEST(step_test_needs_a_short_full_step_near_equilibrium_and_two_exact_contractio
     CHECK(!t.passes(o, true, 3e-4, true, 1.0, 1000.0));
     CHECK(t.passes(o, true, 1e-4, true, 1.0, 1000.0));
   }
+  {  // alternating steps (a softly resisted turn: upper_limb's settle, frame 11, ended 1.5e-3 from
+     // strict FEM on the last three): a contraction is against both steps before it
+    StepTest t;
+    o.step_tol = 5e-3;
+    CHECK(!t.passes(o, true, 4.7e-3, true, 1.0, 1000.0));
+    CHECK(!t.passes(o, true, 1.4e-3, true, 1.0, 1000.0));   // a contraction
+    CHECK(!t.passes(o, true, 3.2e-3, true, 1.0, 1000.0));
+    CHECK(!t.passes(o, true, 1.1e-3, true, 1.0, 1000.0));   // a third of 3.2e-3, but 0.79 of 1.4e-3
+    CHECK(!t.passes(o, true, 2.6e-4, true, 1.0, 1000.0));   // contracts; the step before did not
+    CHECK(t.passes(o, true, 1.0e-4, true, 1.0, 1000.0));
+  }
 }
 
 TEST(newton_driver_stalls_when_no_step_helps) {
