@@ -191,8 +191,9 @@ _TABLE = [
            "says which)",
            core="emu"),
     Option("recycled_directions", int, 4, "emu", ("emu",),
-           "with movable bones: keep the directions of up to this many long CG solves in that correction "
-           "(0: off)",
+           "with movable bones: keep the directions of up to this many long CG solves in that correction, "
+           "and cut a CG solve that stalls (at twice the last step's iterations, at least 30) to keep its "
+           "direction (0: off)",
            check=_at_least(0), must="must be >= 0", core="emu"),
     Option("lbfgs_memory", int, 8, "emu", ("emu",), "the L-BFGS step's curvature pairs", ("lbfgs",),
            check=_at_least(1), must="must be >= 1", core="emu"),
