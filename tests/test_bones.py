@@ -583,9 +583,10 @@ def test_rigid_fit_recovers_a_rigid_motion():
 
 
 def test_recycled_directions_change_cg_not_the_answer():
-    """big_muscle with bone_2 free: a CG solve of 134 iterations after one of
-    20 is recycled into the coarse space of the later steps; the answer is the
-    same equilibrium (the preconditioner changes CG's path, not the answer)."""
+    """big_muscle with bone_2 free: a CG solve that stalls (134 iterations after
+    one of 20 without recycling) is cut and recycled into the coarse space of
+    the later steps; the answer is the same equilibrium (the preconditioner
+    changes CG's path, not the answer)."""
     s = emu.io.load_scene(shared_path("big_muscle"), free_bones=["bone_2"], warn=False)
     plain = emu.Solver(s, "emu", alpha=100, recycled_directions=0).solve({"muscle": 1e4})
     recycled = emu.Solver(s, "emu", alpha=100).solve({"muscle": 1e4})   # the default: 4

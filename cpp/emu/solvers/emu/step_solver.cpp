@@ -187,14 +187,13 @@ bool EmuSolver::StepSolver::step_direction(const Product& product, SearchDirecti
   } else {
     const double eta =
         std::min(o.cg_forcing_max, std::max(o.cg_forcing_min, std::pow(gn_ / g0_, o.cg_forcing_exponent)));
-    const int cap = std::min(o.cg_max_iterations, stall_limit());
+    const int cap = stall_limit();
     const PcgResult cg = pcg_.solve(product, precond, Mat9X(-gR_), eta * gn_, cap, d_, o.cg_model_decrease);
     dir.cg_iterations = cg.iterations;
     if (cg.negative_curvature) ++dir.filtered;  // exact H is indefinite here: keep what CG had
     dir.cg_cut = !cg.converged && !cg.negative_curvature && cap < o.cg_max_iterations;
   }
-  if (learns_modes() && (dir.cg_cut || dir.cg_iterations > std::max(50, 4 * last_cg_)))
-    recycle(d_);
+  if (dir.cg_cut) recycle(d_);  // (a cut needs a coarse space that learns: stall_limit)
   dir.slope = dot(gR_, d_);
   if (!(dir.slope < 0)) {
     precondition(gR_, d_);
@@ -217,16 +216,16 @@ bool EmuSolver::StepSolver::step_direction(const Product& product, SearchDirecti
 // step is no Newton step, so the step test does not stop on it
 // (docs/DESIGN.md, "The cost of an iteration").
 int EmuSolver::StepSolver::stall_limit() const {
-  if (!learns_modes()) return s_.emu_.cg_max_iterations;
-  return std::max(kCgStallMin, kCgStallRatio * last_cg_);
+  const int cap = s_.emu_.cg_max_iterations;
+  return learns_modes() ? std::min(cap, std::max(kCgStallMin, kCgStallRatio * last_cg_)) : cap;
 }
 
 bool EmuSolver::StepSolver::learns_modes() const {
   return s_.emu_.recycled_directions > 0 && bones_ && s_.emu_.bone_coarse_space;  // only a coarse space takes them
 }
 
-// A CG solve far longer than the last one met a mode the preconditioner
-// misses; its direction (orthogonalised against those kept) joins the bone
+// A CG solve cut where it stalled met a mode the preconditioner misses; its
+// direction (orthogonalised against those kept) joins the bone
 // coarse space of the following steps, the oldest dropped beyond
 // EmuSolverOptions::recycled_directions (docs/DESIGN.md, "The cost of an iteration").
 void EmuSolver::StepSolver::recycle(const Mat9X& d) {
