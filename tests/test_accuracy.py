@@ -143,11 +143,12 @@ def test_correct_on_synthetic_corrections():
     corrected, positions x2, estimate |x3 - x2| + |x4 - x3|; a third step longer than that
     (the steps alternate, as along a chain's soft turn) -> not corrected, the
     estimate not certified and the last point kept for the settle; x1
-    overshot (the second step 0.33 of the first) and the third contracts ->
-    not corrected, |x - x3| returned for the next alpha; steps that neither
-    contract nor get under STEP_FRACTION x target within MAX_CORRECTIONS, or
-    a second as long as the first (no third asked) -> (False, None); a later
-    step that short -> corrected there."""
+    overshot (the second step 0.33 of the first, or even longer than ACCEPT x
+    target) and the steps from x2 contract -> corrected at x2 all the same;
+    where PCG on the lagged factor fails, the correction factorises; steps
+    that neither contract nor get under STEP_FRACTION x target within
+    MAX_CORRECTIONS, or a second as long as the first (no third asked) ->
+    False; a later step that short -> corrected there."""
     import dataclasses
     import time
     from emu.core.geometry import bbox_diagonal
@@ -164,43 +165,58 @@ def test_correct_on_synthetic_corrections():
         return y
 
     class Corrections:
-        def __init__(self, steps):
-            self.steps, self.calls = steps, 0
+        def __init__(self, steps, lagged_fails_at):
+            self.steps, self.lagged_fails_at, self.calls, self.factorised = steps, lagged_fails_at, 0, 0
 
         def newton_correction(self, load, y, hessian="lower-energy", max_steps=1):
-            self.calls += 1
             d = round((y[0, 0] - x[0, 0]) / diag, 9)
+            if hessian == "lagged-newton" and d in self.lagged_fails_at:
+                raise RuntimeError("no lagged Newton correction from these positions")
+            self.calls += 1
+            self.factorised += hessian != "lagged-newton"
             return at(self.steps[d])
 
-    def run(own, steps):
-        solver._estimator.fem = Corrections(steps)
-        trial = dataclasses.replace(sol, positions=x, fem_correction=at(own), fem_steps=None,
+    def run(own, steps, lagged_fails_at=(), certificate=None):
+        """certificate: the points x1, x2, ... the estimate's certificate already has."""
+        solver._estimator.fem = Corrections(steps, lagged_fails_at)
+        fem_steps = None if certificate is None else [at(d) for d in certificate]
+        trial = dataclasses.replace(sol, positions=x, fem_correction=at(own), fem_steps=fem_steps,
                                     error_estimate=emu.vertex_error(x, at(own)), corrected=False)
         port = SolvePort(solver, load, time.perf_counter())
         return solver._accuracy.correct(port, trial), trial, solver._estimator.fem.calls
 
-    (ok, closer), trial, calls = run(0.008, {0.008: 0.0086, 0.0086: 0.00875, 0.00875: 0.0088})
-    assert ok and closer is None and trial.corrected and calls == 3
+    ok, trial, calls = run(0.008, {0.008: 0.0086, 0.0086: 0.00875, 0.00875: 0.0088})
+    assert ok and trial.corrected and calls == 3
     assert np.array_equal(trial.positions, at(0.0086))
     assert trial.error_estimate == emu.vertex_error(at(0.0086), at(0.00875)) + emu.vertex_error(at(0.00875), at(0.0088))
-    (ok, closer), trial, calls = run(0.008, {0.008: 0.0086, 0.0086: 0.00875, 0.00875: 0.0078})
-    assert not ok and closer is None and not trial.corrected and calls == 3
+    ok, trial, calls = run(0.008, {0.008: 0.0086, 0.0086: 0.00875, 0.00875: 0.0078})
+    assert not ok and not trial.corrected and calls == 3
     assert trial.error_estimate_certified is False and np.array_equal(trial.fem_steps[-1], at(0.0078))
     assert trial.positions is x
-    (ok, closer), trial, _ = run(0.012, {0.012: 0.008, 0.008: 0.0085})
-    assert not ok and closer == emu.vertex_error(x, at(0.0085)) and not trial.corrected
-    assert trial.positions is x and trial.error_estimate == emu.vertex_error(x, at(0.012))
+    # x1 overshot (|x2 - x1| 0.33 of |x1 - x|), x3 and x4 contract from x2: x2
+    ok, trial, calls = run(0.012, {0.012: 0.008, 0.008: 0.0085, 0.0085: 0.0087})
+    assert ok and trial.corrected and calls == 3 and np.array_equal(trial.positions, at(0.008))
+    # ... even where |x2 - x1| is over ACCEPT x target (0.006), given x3 by the certificate,
+    # and PCG on the lagged factor fails from x3 (a chain's soft turn moved it off the
+    # factor's reach): x4 factorised
+    ok, trial, calls = run(0.02, {0.0125: 0.0126}, lagged_fails_at={0.0125}, certificate=(0.02, 0.012, 0.0125))
+    assert ok and trial.corrected and calls == 1 and solver._estimator.fem.factorised == 1
+    assert np.array_equal(trial.positions, at(0.012))
+    assert trial.error_estimate == emu.vertex_error(at(0.012), at(0.0125)) + emu.vertex_error(at(0.0125), at(0.0126))
+    # |x2 - x1| over ACCEPT x target and no x3 to show a contraction: none taken
+    ok, trial, calls = run(0.02, {0.02: 0.012})
+    assert not ok and not trial.corrected and calls == 1 and trial.positions is x
     # no contraction and no short step within MAX_CORRECTIONS (4) corrections: none taken
-    (ok, closer), _, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0075, 0.0075: 0.0102})
-    assert not ok and closer is None and calls == 4
+    ok, _, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0075, 0.0075: 0.0102})
+    assert not ok and calls == 4
     # no contraction, but the fourth correction moves under STEP_FRACTION x target (FEM's own
     # accuracy stop): its result, with the last two steps summed as the estimate
-    (ok, closer), trial, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0100})
-    assert ok and closer is None and trial.corrected and calls == 3
+    ok, trial, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0100})
+    assert ok and trial.corrected and calls == 3
     assert np.array_equal(trial.positions, at(0.0100))
     assert trial.error_estimate == (emu.vertex_error(at(0.008), at(0.0105)) + emu.vertex_error(at(0.0105), at(0.0100)))
-    (ok, closer), _, calls = run(0.01, {0.01: 0.0})
-    assert not ok and closer is None and calls == 1
+    ok, _, calls = run(0.01, {0.01: 0.0})
+    assert not ok and calls == 1
 
 
 def test_step_fraction_sets_the_stopping_rule():

@@ -118,7 +118,8 @@ class AccuracyPort(Protocol):
         """A context in which runs take CG to ACCURACY_CG_FORCING."""
 
     def correction(self, x):
-        """One FEM Newton correction of positions x (PCG on the estimate's factor), or None."""
+        """One FEM Newton correction of positions x (PCG on the estimate's factor, else a
+        factorisation at x), or None."""
 
     def settle(self, x):
         """A FEM solve from positions x to FEM's accuracy stop: (core result, the last two
@@ -164,7 +165,7 @@ class AccuracyMode:
             own = sol.error_estimate   # a correction replaces it with its last step's length
             stalled = before is not None and own > RESOLVE_GAIN * before
             t1 = time.perf_counter()
-            corrected, closer = self.correct(port, sol) if self.fem_correction else (False, None)
+            corrected = self.correct(port, sol) if self.fem_correction else False
             estimate_s += time.perf_counter() - t1   # the corrections count as estimation time
             if sol.error_estimate_certified is False and self.fem_correction:
                 break   # settled below
@@ -180,8 +181,7 @@ class AccuracyMode:
                     port.set_alpha(alpha_start)
                 break
             before, stalled = own, False
-            # where x1 overshot, the next alpha comes from EMU's distance to x3
-            port.set_alpha(port.alpha * self.raise_factor(own if closer is None else closer))
+            port.set_alpha(port.alpha * self.raise_factor(own))
             highest = port.alpha
             x1 = sol.fem_correction
             if x1 is not None and not port.has_contact:
@@ -280,15 +280,14 @@ class AccuracyMode:
         if sol.converged:   # a solve that stopped early says so in its status already
             warnings.warn(AccuracyWarning(sol.error_estimate_note), stacklevel=4)
 
-    def _verdict(self, steps, own) -> tuple:
+    def _verdict(self, steps) -> tuple:
         """What FEM's correction steps so far say (steps: |x2 - x1|, |x3 - x2|,
-        ...; own: |x1 - x|): ("answer", k, estimate) the answer is point k (x1 is
-        0); ("overshot",) x1 overshot but x3 contracts; ("not certified",) the
-        contraction did not last; ("more",) another step decides."""
+        ...): ("answer", k, estimate) the answer is point k (x1 is 0); ("not
+        certified",) the contraction did not last; ("more",) another step
+        decides. Where x1 overshot (|x2 - x1| over CORRECTION_CONTRACTION |x1 - x|)
+        the steps from x2 on decide all the same: x2's error is theirs to tell."""
         tenth = 0.1 * STEP_FRACTION * self.target   # the certificate's early exit
         if len(steps) >= 2 and steps[1] <= CORRECTION_CONTRACTION * steps[0]:
-            if steps[0] > CORRECTION_CONTRACTION * own:
-                return ("overshot",)
             # x2, estimated by the way FEM's steps still go from it, where x4's step
             # is no longer than |x2 - x1| (CORRECTION_LASTS): along a chain's soft turn
             # the steps alternate long and short, the third longer than the first
@@ -302,61 +301,61 @@ class AccuracyMode:
             return ("answer", len(steps), steps[-2] + steps[-1])   # FEM's own accuracy stop
         return ("more",)
 
-    def correct(self, port: AccuracyPort, sol) -> tuple:
+    def correct(self, port: AccuracyPort, sol) -> bool:
         """EMU's estimate above ACCEPT x target: FEM Newton corrections from the
         estimate's x1 (x2 of x1, x3 of x2, ... at most MAX_CORRECTIONS), each
         certified or not as FEM's own solves are:
-        - the corrections contract (|x2 - x1| <= CORRECTION_CONTRACTION |x1 - x|,
-          within ACCEPT x target, and |x3 - x2| <= CORRECTION_CONTRACTION |x2 -
-          x1|: FEM's Newton in its fast regime) and the next step |x4 - x3|
+        - the corrections contract (|x3 - x2| <= CORRECTION_CONTRACTION |x2 -
+          x1|: FEM's Newton in its fast regime from x2) and the next step |x4 - x3|
           is no longer than |x2 - x1| (none asked where |x3 - x2| is within
           a tenth of FEM's accuracy stop): x2, estimated |x3 - x2| + |x4 - x3|
           (2 |x3 - x2| without x4). Where x4's step is longer, the contraction
           did not last (along a chain's soft turn FEM's steps alternate long and
           short): the estimate is marked not certified, fem_steps extended to
-          x4, and (False, None) returned; the caller settles the answer;
+          x4, and False returned; the caller settles the answer;
         - or a correction moves no vertex by more than STEP_FRACTION x target
           (FEM's accuracy-mode stop): that correction's result, with its last two
           steps' lengths summed as its estimate (a bound: the steps need not
           shrink at once).
-        Then the solution's positions are the corrected answer and (True, None)
-        is returned. Otherwise the solution is left as it was and (False, |x -
-        x3|) is returned where x1 overshot but x3 contracts (a closer FEM point
-        to choose the next alpha by), else (False, None)."""
+        Corrections are asked only while they shrink (|x2 - x1| < |x1 - x|) and
+        |x2 - x1| is within ACCEPT x target or already contracts to x3 (x1 may
+        overshoot EMU's error along a bone's turn and x2 still land in FEM's
+        Newton regime: upper_limb). Then the solution's positions are the corrected
+        answer and True is returned; otherwise the solution is left as it was
+        and False returned."""
         target = self.target
         x, x1 = sol.positions, sol.fem_correction
         if x1 is None:
-            return False, None
+            return False
         own = vertex_error(x, x1)
         points = list(sol.fem_steps) if sol.fem_steps else [x1]   # the estimate's and certificate's own steps
         if len(points) == 1:
             if (x2 := port.correction(x1)) is None:
-                return False, None
+                return False
             points.append(x2)
         steps = [vertex_error(a, b) for a, b in zip(points, points[1:])]
         # corrections that do not shrink, or stay longer than the target: no
         # FEM point near enough to be worth another
-        if not (steps[0] < own and steps[0] <= ACCEPT * target):
-            return False, None
+        if not (steps[0] < own and (steps[0] <= ACCEPT * target or
+                                    (len(steps) >= 2 and steps[1] <= CORRECTION_CONTRACTION * steps[0]))):
+            return False
         while True:
-            verdict = self._verdict(steps, own)
+            verdict = self._verdict(steps)
             if verdict[0] == "answer":
                 answer, estimate = points[verdict[1]], verdict[2]
                 break
-            if verdict[0] == "overshot":   # EMU's answer is not corrected
-                return False, vertex_error(x, points[2])
             if verdict[0] == "not certified":   # settled from the last point by the caller
                 sol.error_estimate_certified, sol.fem_steps = False, points
-                return False, None
+                return False
             if len(steps) >= MAX_CORRECTIONS:
-                return False, None
+                return False
             y = port.correction(points[-1])
             if y is None:
-                return False, None
+                return False
             points.append(y)
             steps.append(vertex_error(points[-2], y))
         sol.positions, sol.corrected, sol.error_estimate = answer, True, estimate
         sol.error_estimate_note = (f"EMU's answer (estimated {own:.2g} from FEM's) corrected by {len(steps)} FEM "
                                    "Newton steps; the estimate is the length of the last ones")
         sol.inverted_tets = port.inverted(answer)
-        return True, None
+        return True

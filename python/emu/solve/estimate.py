@@ -158,6 +158,19 @@ class ErrorEstimator:
         y = np.asarray(y)
         return y if np.all(np.isfinite(y)) else None
 
+    def correction(self, load, x):
+        """One FEM Newton correction of positions x for accuracy mode: by PCG on
+        the estimator's last factor, else with a factorisation at x (where x has
+        moved off that factor's reach: a chain's soft turn), None where both fail."""
+        y = self.lagged_correction(load, x)
+        if y is not None or self.contact is not None:
+            return y
+        try:
+            y = np.asarray(self.fem.newton_correction(load, x, hessian="exact", max_steps=1))
+        except (RuntimeError, ValueError):
+            return None
+        return y if np.all(np.isfinite(y)) else None
+
     def settle(self, load, x):
         """A FEM solve from positions x with FEM's accuracy-mode stop, on the
         estimator (its lagged factor): accuracy mode's answer where EMU's

@@ -291,7 +291,7 @@ class SolvePort:
         return self._solver._tight_cg()
 
     def correction(self, x):
-        return self._solver._estimator.lagged_correction(self._load, x)
+        return self._solver._estimator.correction(self._load, x)
 
     def settle(self, x):
         return self._solver._estimator.settle(self._load, x)
