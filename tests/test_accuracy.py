@@ -209,12 +209,17 @@ def test_correct_on_synthetic_corrections():
     # no contraction and no short step within MAX_CORRECTIONS (4) corrections: none taken
     ok, _, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0075, 0.0075: 0.0102})
     assert not ok and calls == 4
-    # no contraction, but the fourth correction moves under STEP_FRACTION x target (FEM's own
-    # accuracy stop): its result, with the last two steps summed as the estimate
+    # no contraction by 0.3, but the third correction moves under STEP_FRACTION x target
+    # (FEM's own accuracy stop): its result, estimated by its last step where the last two
+    # halve (a geometric tail), else by the last two summed (a bound)
     ok, trial, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0100})
     assert ok and trial.corrected and calls == 3
     assert np.array_equal(trial.positions, at(0.0100))
-    assert trial.error_estimate == (emu.vertex_error(at(0.008), at(0.0105)) + emu.vertex_error(at(0.0105), at(0.0100)))
+    assert trial.error_estimate == emu.vertex_error(at(0.0105), at(0.0100))
+    ok, trial, calls = run(0.012, {0.012: 0.008, 0.008: 0.0093, 0.0093: 0.0101})
+    assert ok and trial.corrected and calls == 3
+    assert np.array_equal(trial.positions, at(0.0101))
+    assert trial.error_estimate == (emu.vertex_error(at(0.008), at(0.0093)) + emu.vertex_error(at(0.0093), at(0.0101)))
     ok, _, calls = run(0.01, {0.01: 0.0})
     assert not ok and calls == 1
 

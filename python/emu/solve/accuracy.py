@@ -100,6 +100,14 @@ P_RAISE, RAISE_MIN, RAISE_MAX = 0.75, 1.5, 30.0
 SETTLE_RAISE_MAX = 2.0
 
 
+def stop_estimate(steps) -> float:
+    """What FEM's accuracy stop leaves after its last steps (steps: their
+    lengths, the last two or fewer counted): at most the last step where the last two halve
+    (a geometric tail at rate r <= 1/2 sums to r / (1 - r) <= 1 of it), else
+    the last two summed (a bound: the steps need not shrink at once)."""
+    return float(steps[-1] if len(steps) >= 2 and steps[-1] <= 0.5 * steps[-2] else sum(steps[-2:]))
+
+
 class AccuracyPort(Protocol):
     """What accuracy mode drives: one solve's EMU runs and FEM steps under one load
     (the Solver makes one per solve)."""
@@ -238,9 +246,7 @@ class AccuracyMode:
         distance = vertex_error(x, answer)
         own = sol.error_estimate
         sol.positions, sol.corrected = answer, True
-        # what FEM's stop leaves: at most its last step where the steps halve
-        # (geometric: r / (1 - r) of it), else the last two steps (a bound)
-        sol.error_estimate = float(steps[-1] if len(steps) == 2 and steps[-1] <= 0.5 * steps[0] else sum(steps))
+        sol.error_estimate = stop_estimate(steps)
         sol.error_estimate_note = (f"EMU's answer (estimated {own:.2g} from FEM's, not certified: its FEM Newton "
                                    f"steps did not contract) settled by a FEM solve from it ({r.iterations} Newton "
                                    f"steps, {distance:.2g} from EMU's answer); the estimate is the length of its "
@@ -298,7 +304,7 @@ class AccuracyMode:
                     return ("answer", 1, steps[1] + steps[2])
                 return ("not certified",)
         elif len(steps) >= 2 and steps[-1] <= STEP_FRACTION * self.target:
-            return ("answer", len(steps), steps[-2] + steps[-1])   # FEM's own accuracy stop
+            return ("answer", len(steps), stop_estimate(steps))   # FEM's own accuracy stop
         return ("more",)
 
     def correct(self, port: AccuracyPort, sol) -> bool:
@@ -314,9 +320,9 @@ class AccuracyMode:
           short): the estimate is marked not certified, fem_steps extended to
           x4, and False returned; the caller settles the answer;
         - or a correction moves no vertex by more than STEP_FRACTION x target
-          (FEM's accuracy-mode stop): that correction's result, with its last two
-          steps' lengths summed as its estimate (a bound: the steps need not
-          shrink at once).
+          (FEM's accuracy-mode stop): that correction's result, estimated as
+          FEM's stop is (stop_estimate: its last step where the last two halve,
+          else the two summed).
         Corrections are asked only while they shrink (|x2 - x1| < |x1 - x|) and
         |x2 - x1| is within ACCEPT x target or already contracts to x3 (x1 may
         overshoot EMU's error along a bone's turn and x2 still land in FEM's
