@@ -145,7 +145,7 @@ def test_correct_on_synthetic_corrections():
     estimate not certified and the last point kept for the settle; x1
     overshot (the second step 0.33 of the first, or even longer than ACCEPT x
     target) and the steps from x2 contract -> corrected at x2 all the same;
-    where PCG on the lagged factor fails, the correction factorises; steps
+    every correction an exact Newton step ("newton"); steps
     that neither contract nor get under STEP_FRACTION x target within
     MAX_CORRECTIONS, or a second as long as the first (no third asked) ->
     False; a later step that short -> corrected there."""
@@ -165,20 +165,17 @@ def test_correct_on_synthetic_corrections():
         return y
 
     class Corrections:
-        def __init__(self, steps, lagged_fails_at):
-            self.steps, self.lagged_fails_at, self.calls, self.factorised = steps, lagged_fails_at, 0, 0
+        def __init__(self, steps):
+            self.steps, self.calls = steps, 0
 
         def newton_correction(self, load, y, hessian="lower-energy", max_steps=1):
-            d = round((y[0, 0] - x[0, 0]) / diag, 9)
-            if hessian == "lagged-newton" and d in self.lagged_fails_at:
-                raise RuntimeError("no lagged Newton correction from these positions")
+            assert hessian == "newton" and max_steps == 1   # exact Newton steps only
             self.calls += 1
-            self.factorised += hessian != "lagged-newton"
-            return at(self.steps[d])
+            return at(self.steps[round((y[0, 0] - x[0, 0]) / diag, 9)])
 
-    def run(own, steps, lagged_fails_at=(), certificate=None):
+    def run(own, steps, certificate=None):
         """certificate: the points x1, x2, ... the estimate's certificate already has."""
-        solver._estimator.fem = Corrections(steps, lagged_fails_at)
+        solver._estimator.fem = Corrections(steps)
         fem_steps = None if certificate is None else [at(d) for d in certificate]
         trial = dataclasses.replace(sol, positions=x, fem_correction=at(own), fem_steps=fem_steps,
                                     error_estimate=emu.vertex_error(x, at(own)), corrected=False)
@@ -196,11 +193,9 @@ def test_correct_on_synthetic_corrections():
     # x1 overshot (|x2 - x1| 0.33 of |x1 - x|), x3 and x4 contract from x2: x2
     ok, trial, calls = run(0.012, {0.012: 0.008, 0.008: 0.0085, 0.0085: 0.0087})
     assert ok and trial.corrected and calls == 3 and np.array_equal(trial.positions, at(0.008))
-    # ... even where |x2 - x1| is over ACCEPT x target (0.006), given x3 by the certificate,
-    # and PCG on the lagged factor fails from x3 (a chain's soft turn moved it off the
-    # factor's reach): x4 factorised
-    ok, trial, calls = run(0.02, {0.0125: 0.0126}, lagged_fails_at={0.0125}, certificate=(0.02, 0.012, 0.0125))
-    assert ok and trial.corrected and calls == 1 and solver._estimator.fem.factorised == 1
+    # ... even where |x2 - x1| is over ACCEPT x target (0.006), given x3 by the certificate
+    ok, trial, calls = run(0.02, {0.0125: 0.0126}, certificate=(0.02, 0.012, 0.0125))
+    assert ok and trial.corrected and calls == 1
     assert np.array_equal(trial.positions, at(0.012))
     assert trial.error_estimate == emu.vertex_error(at(0.012), at(0.0125)) + emu.vertex_error(at(0.0125), at(0.0126))
     # |x2 - x1| over ACCEPT x target and no x3 to show a contraction: none taken
@@ -210,12 +205,12 @@ def test_correct_on_synthetic_corrections():
     ok, _, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0075, 0.0075: 0.0102})
     assert not ok and calls == 4
     # no contraction by 0.3, but the third correction moves under STEP_FRACTION x target
-    # (FEM's own accuracy stop): its result, estimated by its last step where the last two
-    # halve (a geometric tail), else by the last two summed (a bound)
+    # (FEM's own accuracy stop): its result, estimated by the last two steps summed (a
+    # bound), even where they halve
     ok, trial, calls = run(0.012, {0.012: 0.008, 0.008: 0.0105, 0.0105: 0.0100})
     assert ok and trial.corrected and calls == 3
     assert np.array_equal(trial.positions, at(0.0100))
-    assert trial.error_estimate == emu.vertex_error(at(0.0105), at(0.0100))
+    assert trial.error_estimate == (emu.vertex_error(at(0.008), at(0.0105)) + emu.vertex_error(at(0.0105), at(0.0100)))
     ok, trial, calls = run(0.012, {0.012: 0.008, 0.008: 0.0093, 0.0093: 0.0101})
     assert ok and trial.corrected and calls == 3
     assert np.array_equal(trial.positions, at(0.0101))
@@ -435,12 +430,13 @@ def test_reported_times_are_whole():
         assert f"{sol.time_s:.3f} s" in sol.summary()
 
 
-def test_lagged_newton_corrections_factorise_nothing():
+def test_newton_corrections_factorise_only_where_pcg_on_the_last_factor_fails():
     """The corrections accuracy mode certifies answers with: the exact Newton
-    step by PCG on the estimator's last factor, nothing factorised; no factor
-    yet, or a point where that PCG fails, is an error (the caller takes it as
-    'no correction'), never a filtered step. Where the exact Hessian is
-    definite the step is the exact mode's (to PCG's tolerance)."""
+    step by PCG on the estimator's last factor ("lagged-newton": nothing
+    factorised; no factor yet, or a point where that PCG fails, is an error,
+    never a filtered step), or by a factorisation where that PCG fails
+    ("newton"). Where the exact Hessian is definite both are the exact mode's
+    step (to PCG's tolerance)."""
     s = fusiform(2, warn=False)
     solver = emu.Solver(s, "emu", alpha=100.0, accuracy=0.01)
     sol = solver.solve({"belly": 5e4})
@@ -455,6 +451,15 @@ def test_lagged_newton_corrections_factorise_nothing():
     assert est.factorizations == n
     exact = np.asarray(fresh.newton_correction(load, x, "exact", 1))   # a fresh factorisation
     assert emu.vertex_error(y, exact) < 1e-3 * emu.vertex_error(x, exact)
+    z = np.asarray(est.newton_correction(load, x, "newton", 1))   # PCG on the last factor converges
+    assert est.factorizations == n and emu.vertex_error(z, y) < 1e-12
+    opts = emu._core.SolverOptions()
+    opts.lagged_cg_iterations = 25
+    unfactorised = emu._core.FemSolver(solver.model, opts)   # no factor yet: "newton" factorises
+    w = np.asarray(unfactorised.newton_correction(load, x, "newton", 1))
+    assert unfactorised.factorizations == 1 and emu.vertex_error(w, exact) < 1e-12
+    with pytest.raises(ValueError, match="'newton'"):
+        est.newton_correction(load, x, "newtonian", 1)
 
 
 def test_the_alpha_carried_down_stops_at_a_floor():

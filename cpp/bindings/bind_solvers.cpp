@@ -263,9 +263,10 @@ void bind_fem_solver(py::module_& m) {
             if (hessian == "exact") h = FemSolver::CorrectionHessian::Exact;
             else if (hessian == "filtered") h = FemSolver::CorrectionHessian::Filtered;
             else if (hessian == "lagged-newton") h = FemSolver::CorrectionHessian::LaggedNewton;
+            else if (hessian == "newton") h = FemSolver::CorrectionHessian::Newton;
             else if (hessian != "lower-energy")
-              throw std::invalid_argument("hessian must be 'lower-energy', 'exact', 'filtered' or 'lagged-newton', got '" +
-                                          hessian + "'");
+              throw std::invalid_argument("hessian must be 'lower-energy', 'exact', 'filtered', 'lagged-newton' or "
+                                          "'newton', got '" + hessian + "'");
             py::gil_scoped_release release;
             return s.newton_correction(l, x0, h, max_steps);
           },

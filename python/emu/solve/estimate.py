@@ -101,7 +101,8 @@ class ErrorEstimator:
 
     def certify(self, load, x, x1) -> tuple:
         """(certified, [x1, x2, ...], note): up to CERTIFY_STEPS more FEM Newton
-        corrections of x1 (PCG on the estimator's factor: nothing factorised),
+        corrections of x1 (exact Newton steps: PCG on the estimator's factor,
+        a factorisation only where that PCG does not converge),
         by which the estimate |x - last| holds where FEM's Newton is in its
         regime at EMU's answer x: each step at most CERTIFY_CONTRACTION of the
         one before, or the last within STEP_FRACTION x the accuracy (FEM's own
@@ -141,34 +142,24 @@ class ErrorEstimator:
     def _certificate_step(self, load, y):
         """One FEM Newton correction of y for the certificate, or None."""
         if self.contact is None:
-            return self.lagged_correction(load, y)
+            return self.correction(load, y)
         try:   # no lagged factor with contact (its pattern changes): a step of its own
             return np.asarray(self.fem.newton_correction(load, y, max_steps=1))
         except (RuntimeError, ValueError):
             return None
 
-    def lagged_correction(self, load, x):
-        """One FEM Newton correction of positions x by PCG on the estimator's
-        last factor (nothing factorised, no filtered fallback), None where that
-        fails: accuracy mode's corrections, certified only in Newton's regime."""
+    def correction(self, load, x):
+        """One exact FEM Newton correction of positions x: by PCG on the
+        estimator's last factor where it converges, else with a factorisation
+        at x (where x moved off that factor's reach: a chain's soft turn, a
+        sequence's later frames); None where the exact Newton matrix is not
+        definite there (no filtered step: the certificate and accuracy mode's
+        corrections compare Newton steps, certified only in Newton's regime)."""
         try:
-            y = self.fem.newton_correction(load, x, hessian="lagged-newton", max_steps=1)
+            y = self.fem.newton_correction(load, x, hessian="newton", max_steps=1)
         except (RuntimeError, ValueError):   # ValueError: with contact, x has surfaces through each other
             return None
         y = np.asarray(y)
-        return y if np.all(np.isfinite(y)) else None
-
-    def correction(self, load, x):
-        """One FEM Newton correction of positions x for accuracy mode: by PCG on
-        the estimator's last factor, else with a factorisation at x (where x has
-        moved off that factor's reach: a chain's soft turn), None where both fail."""
-        y = self.lagged_correction(load, x)
-        if y is not None or self.contact is not None:
-            return y
-        try:
-            y = np.asarray(self.fem.newton_correction(load, x, hessian="exact", max_steps=1))
-        except (RuntimeError, ValueError):
-            return None
         return y if np.all(np.isfinite(y)) else None
 
     def settle(self, load, x):

@@ -396,6 +396,20 @@ class FemSolver::NewtonProblem {
     int cg = 0;
     return step_.lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0;
   }
+  /// The exact Newton step: PCG on the lagged factor where it converges, else a
+  /// factorisation of the exact matrix; false where that matrix is not
+  /// definite (PCG met negative curvature, or the factorisation failed).
+  bool exact_newton_direction() {
+    if (s_.has_contact()) s_.set_contact_hessian(x_);
+    s_.assemble_hessian(x_, act_, true);
+    last_exact_ = true;
+    if (s_.options_.lagged_cg_iterations > 0 && s_.lag_.valid && !s_.has_contact()) {
+      int cg = 0;
+      if (step_.lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
+      if (step_.lagged_indefinite()) return false;
+    }
+    return step_.newton_direction(true) && slope() < 0;
+  }
   /// Whether the last correction_direction used the exact element Hessians.
   bool last_direction_exact() const { return last_exact_; }
 
@@ -485,6 +499,14 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
       if (!newton.lagged_newton_direction())
         throw std::runtime_error("no lagged Newton correction from these positions: PCG on the last factor did "
                                  "not converge or met negative curvature");
+      newton.trial_energy(1.0);
+      x = newton.trial_positions();
+      break;
+    }
+    if (hessian == CorrectionHessian::Newton) {
+      if (!newton.exact_newton_direction())
+        throw std::runtime_error("no Newton correction from these positions: the exact Newton matrix is not "
+                                 "positive definite");
       newton.trial_energy(1.0);
       x = newton.trial_positions();
       break;

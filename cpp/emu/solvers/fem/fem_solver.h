@@ -45,7 +45,11 @@ class FemSolver {
   /// LaggedNewton: the exact Newton step by PCG on the last factorisation only,
   /// nothing factorised; where that PCG fails no step (accuracy mode's cheap
   /// corrections, which only Newton's regime can certify).
-  enum class CorrectionHessian { Exact, Filtered, LowerEnergy, LaggedNewton };
+  /// Newton: the exact Newton step, by PCG on the last factorisation where it
+  /// converges, else by a factorisation; where the exact matrix is not
+  /// definite no step (never the filtered one: the certificate's and
+  /// accuracy mode's corrections compare Newton steps).
+  enum class CorrectionHessian { Exact, Filtered, LowerEnergy, LaggedNewton, Newton };
 
   /// Positions after full Newton steps of the FEM energy from x0 (#V by 3;
   /// each bone first at the best rigid fit of its rows): the linearised
