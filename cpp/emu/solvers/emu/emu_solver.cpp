@@ -128,9 +128,7 @@ std::vector<std::pair<std::string, double>> EmuSolver::structures() const {
     // H Z (3 turns per bone and the recycled directions, at most) and the
     // recycled directions' columns of Z over all unknowns, rebuilt every
     // Newton step; Z's turns are the unit-turn fits' follow fields, below
-    // (and in joint coordinates each joint turn's smoothed direction, its column and H of it)
-    const double vectors =
-        3.0 * layout_.num_bones + 2.0 * emu_.recycled_directions + (joints_ ? 2.0 * joints_->size() : 0.0);
+    const double vectors = 3.0 * layout_.num_bones + 2.0 * emu_.recycled_directions;
     out.emplace_back("movable bones and their coarse space", vectors * 9.0 * layout_.num_unknowns * 8);
     out.emplace_back("bones' unit-turn fits", turn_fits_->bytes());
   }

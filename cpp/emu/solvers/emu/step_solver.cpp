@@ -117,56 +117,14 @@ void EmuSolver::StepSolver::build_coarse_space(const std::vector<Mat9>& H, bool 
         s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
     }
   };
+  // in joint coordinates the coarse turns are the turn map's combinations of
+  // the bones' turns (a joint turns its subtree)
   if (!s_.joints_) {
     coarse_.build(F_, turn, product, recycled_);
     return;
   }
-  // In joint coordinates the bones' turns serve twice, made once: the
-  // smoothed joint turns are combinations of them, and the coarse space
-  // takes them as they are (its turn k of bone b is [e_k]x F_b, as here).
-  const int nb = s_.layout_.num_bones;
-  std::vector<std::array<Mat9X, 3>> Zb(nb), HZb(nb);
-  for (int b = 0; b < nb; ++b) {
-    std::array<Mat3, 3> M;
-    for (int k = 0; k < 3; ++k) M[k] = cross_matrix(Vec3::Unit(k)) * unflatten(F_.col(s_.layout_.num_soft + b));
-    turn(b, M, Zb[b], HZb[b]);
-  }
   const Eigen::MatrixXd turn_map = s_.joints_->turn_map(F_);
-  coarse_.build(
-      F_,
-      [&](int b, const std::array<Mat3, 3>&, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
-        Z = std::move(Zb[b]);
-        HZ = std::move(HZb[b]);
-      },
-      product, smoothed_joint_turns(Zb, HZb, turn_map), &turn_map);
-}
-
-// The recycled directions and each joint's turn z = Z T (H z = (H Z) T,
-// from the bones' turns Zb, HZb) smoothed once by the base preconditioner,
-// z - B H z: the coarse turns' soft tissue follows as the fit places it,
-// stiffer than the material lets it follow, and without the smoothed turns
-// CG's truncated steps are short along a chain's soft turns while the
-// answer is still far (docs/DESIGN.md, "Chains of bones in EMU").
-std::vector<Mat9X> EmuSolver::StepSolver::smoothed_joint_turns(const std::vector<std::array<Mat9X, 3>>& Zb,
-                                        const std::vector<std::array<Mat9X, 3>>& HZb,
-                                        const Eigen::MatrixXd& turn_map) const {
-  std::vector<Mat9X> extra = recycled_;
-  const int nb = s_.layout_.num_bones, nu = s_.layout_.num_unknowns;
-  Mat9X z, Hz, BHz;
-  for (Eigen::Index j = 0; j < turn_map.cols(); ++j) {
-    z.setZero(9, nu);
-    Hz.setZero(9, nu);
-    for (int b = 0; b < nb; ++b)
-      for (int k = 0; k < 3; ++k) {
-        const double t = turn_map(3 * b + k, j);
-        if (t == 0.0) continue;
-        z += t * Zb[b][k];
-        Hz += t * HZb[b][k];
-      }
-    s_.base_precondition(F_, Hz, BHz);
-    extra.push_back(z - BHz);
-  }
-  return extra;
+  coarse_.build(F_, turn, product, recycled_, &turn_map);
 }
 
 // d_ by the step's kind: the preconditioner's step (Woodbury), L-BFGS on it,

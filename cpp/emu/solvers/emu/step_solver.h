@@ -1,8 +1,8 @@
 #pragma once
 // The linear algebra of one EMU Newton step, apart from the iterate it serves:
 // the Hessian's blocks and the preconditioner built on them (refreshed when
-// due), contact's Hessian, the bone coarse space (in joint coordinates with
-// the smoothed joint turns) and the step's direction by its kind (Woodbury,
+// due), contact's Hessian, the bone coarse space (in joint coordinates, the
+// joints' turns) and the step's direction by its kind (Woodbury,
 // L-BFGS, or PCG to Eisenstat-Walker's forcing), with CG's recycled directions
 // and L-BFGS's memory kept across steps. Private to emu_solver.cpp
 // (EmuSolver::NewtonProblem holds one).
@@ -44,9 +44,6 @@ class EmuSolver::StepSolver {
   void hessian_product(const std::vector<Mat9>& H, bool exact, const Mat9X& v, Mat9X& out) const;
   template <class Product>
   void build_coarse_space(const std::vector<Mat9>& H, bool exact, const Product& product);
-  std::vector<Mat9X> smoothed_joint_turns(const std::vector<std::array<Mat9X, 3>>& Zb,
-                                          const std::vector<std::array<Mat9X, 3>>& HZb,
-                                          const Eigen::MatrixXd& turn_map) const;
   template <class Product>
   bool step_direction(const Product& product, SearchDirection& dir);
   void recycle(const Mat9X& d);
