@@ -342,8 +342,8 @@ class AccuracyMode:
                 return False
             points.append(x2)
         steps = [vertex_error(a, b) for a, b in zip(points, points[1:])]
-        # corrections that do not shrink, or stay longer than the target: no
-        # FEM point near enough to be worth another
+        # corrections that do not shrink, or stay longer than the target without
+        # contracting after: no FEM point near enough to be worth another
         if not (steps[0] < own and (steps[0] <= ACCEPT * target or
                                     (len(steps) >= 2 and steps[1] <= CORRECTION_CONTRACTION * steps[0]))):
             return False
