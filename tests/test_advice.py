@@ -21,6 +21,9 @@ def test_the_hint_names_the_faster_method_by_soft_tets(monkeypatch):
     assert "slower at every size measured" in advice.method_hint(s, "emu", sequence=True)
     fusiform = emu.scenes.fusiform(1, warn=False)                     # no bone: the other crossover
     assert advice.faster_method(fusiform) == "fem" and "without moving bones" in advice.method_hint(fusiform, "emu")
+    # a sequence without moving bones: EMU measured faster per warm frame from 81k soft tets
+    hint = advice.method_hint(fusiform, "emu", sequence=True)
+    assert "FEM is as fast" in hint and "measured crossover" in hint and "81,000 soft tets" in hint
 
 
 def test_run_logs_the_hint(tmp_path):
