@@ -495,18 +495,14 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
       x = newton.positions();
       break;
     }
-    if (hessian == CorrectionHessian::LaggedNewton) {
-      if (!newton.lagged_newton_direction())
-        throw std::runtime_error("no lagged Newton correction from these positions: PCG on the last factor did "
-                                 "not converge or met negative curvature");
-      newton.trial_energy(1.0);
-      x = newton.trial_positions();
-      break;
-    }
-    if (hessian == CorrectionHessian::Newton) {
-      if (!newton.exact_newton_direction())
-        throw std::runtime_error("no Newton correction from these positions: the exact Newton matrix is not "
-                                 "positive definite");
+    // the exact Newton step alone (never a filtered one): one step, or none
+    if (hessian == CorrectionHessian::LaggedNewton || hessian == CorrectionHessian::Newton) {
+      const bool lagged = hessian == CorrectionHessian::LaggedNewton;
+      if (!(lagged ? newton.lagged_newton_direction() : newton.exact_newton_direction()))
+        throw std::runtime_error(lagged ? "no lagged Newton correction from these positions: PCG on the last "
+                                          "factor did not converge or met negative curvature"
+                                        : "no Newton correction from these positions: the exact Newton matrix is "
+                                          "not positive definite");
       newton.trial_energy(1.0);
       x = newton.trial_positions();
       break;
