@@ -4,6 +4,7 @@ iteration, far fewer factorisations, the factor reused across the solves of a
 sequence."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import emu
@@ -40,6 +41,30 @@ def test_lagged_factor_is_reused_across_the_frames_of_a_sequence(kind):
     assert first.factorizations >= 1
     assert second.converged and second.factorizations == 0 and second.cg_iterations > 0
     assert emu.vertex_error(second.positions, direct.positions) < 1e-5
+
+
+def test_an_aged_factor_is_refreshed_before_its_pcg_grows():
+    # A sequence of growing activations: PCG on the first frame's factor grows
+    # frame by frame. With lagged_refresh a solve past refresh_iterations makes
+    # the next step factorise: more factorisations, fewer PCG iterations, the
+    # same answers.
+    scene = emu.scenes.fusiform(3, warn=False)
+    runs = {}
+    for refresh in (False, True):
+        solver = emu.Solver(scene, "fem", lagged_factor=True, lagged_refresh=refresh, rtol_grad=1e-9)
+        prev, answers = None, []
+        for a in np.linspace(1e4, 1e5, 6):
+            prev = solver.solve({"belly": a}, initial=prev)
+            assert prev.converged, prev.status
+            answers.append(prev.positions)
+        assert solver.settings["lagged_refresh"] is refresh
+        runs[refresh] = (solver._core, answers)
+    (plain, plain_x), (fresh, fresh_x) = runs[False], runs[True]
+    assert fresh.refresh_iterations >= 8
+    assert fresh.factorizations > plain.factorizations
+    assert fresh.pcg_iterations < 0.75 * plain.pcg_iterations
+    for a, b in zip(plain_x, fresh_x):
+        assert emu.vertex_error(a, b) < 1e-7
 
 
 def test_a_one_iteration_cap_still_converges_by_factorising():

@@ -157,7 +157,8 @@ void bind_options(py::module_& m) {
       .def_readwrite("exact_when_definite", &SolverOptions::exact_when_definite)
       .def_readwrite("negative_curvature", &SolverOptions::negative_curvature)
       .def_readwrite("lagged_cg_iterations", &SolverOptions::lagged_cg_iterations)
-      .def_readwrite("lagged_cg_forcing", &SolverOptions::lagged_cg_forcing);
+      .def_readwrite("lagged_cg_forcing", &SolverOptions::lagged_cg_forcing)
+      .def_readwrite("lagged_refresh", &SolverOptions::lagged_refresh);
 
   m.def(
       "option_choices",
@@ -274,8 +275,14 @@ void bind_fem_solver(py::module_& m) {
           "Positions after the Newton correction steps of the FEM energy from x0")
       .def_property_readonly("setup_seconds", &FemSolver::setup_seconds)
       .def_property_readonly("factor_nnz", &FemSolver::factor_nnz)
+      .def_property_readonly("factorization_flops", &FemSolver::factorization_flops,
+                             "floating-point operations of one numeric factorisation of the Newton matrix")
       .def_property_readonly("factorizations", &FemSolver::factorizations,
-                             "numeric factorisations of the Newton matrix so far (solves and corrections)");
+                             "numeric factorisations of the Newton matrix so far (solves and corrections)")
+      .def_property_readonly("refresh_iterations", &FemSolver::refresh_iterations,
+                             "with SolverOptions.lagged_refresh: PCG iterations past which the lagged factor has aged")
+      .def_property_readonly("pcg_iterations", &FemSolver::pcg_iterations,
+                             "PCG iterations on the lagged factor so far (solves and corrections)");
 }
 
 void bind_emu_solver(py::module_& m) {

@@ -207,4 +207,21 @@ double CholmodFactor::factor_nnz() const {
   return static_cast<double>(static_cast<const int*>(L_->p)[n_]);
 }
 
+double CholmodFactor::factorization_flops() const {
+  if (!L_) return 0.0;
+  double total = 0;
+  if (L_->is_super) {
+    const int* super = static_cast<const int*>(L_->super);
+    const int* pi = static_cast<const int*>(L_->pi);
+    for (size_t s = 0; s < L_->nsuper; ++s) {
+      const double r = pi[s + 1] - pi[s], c = super[s + 1] - super[s];
+      total += c * r * r - r * c * (c - 1) + (c - 1) * c * (2 * c - 1) / 6.0;  // sum_{j < c} (r - j)^2
+    }
+    return total;
+  }
+  const int* p = static_cast<const int*>(L_->p);
+  for (int j = 0; j < n_; ++j) total += static_cast<double>(p[j + 1] - p[j]) * (p[j + 1] - p[j]);
+  return total;
+}
+
 }  // namespace emu

@@ -58,6 +58,10 @@ class CholmodFactor {
   bool simplicial() const { return L_ && !L_->is_super; }
   bool factorized() const { return factorized_; }
   double factor_nnz() const;
+  /// Multiply-adds of one numeric factorisation, the sum over L's columns of
+  /// their squared lengths (supernodal: a supernode of r rows and c columns
+  /// counts sum_{j < c} (r - j)^2, its explicit zeros included); 0 before analyze.
+  double factorization_flops() const;
   /// The factor itself (null before analyze).
   const cholmod_factor* factor() const { return L_; }
   /// Entries of A (upper triangle) as analysed.

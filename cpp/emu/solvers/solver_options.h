@@ -61,6 +61,12 @@ struct SolverOptions {
   // that fails. 0: off (a factorisation every iteration).
   int lagged_cg_iterations = 0;
   double lagged_cg_forcing = 0.5;
+  // FEM with a lagged factor: a PCG solve that converged in more iterations
+  // than about half a factorisation costs (FemSolver::refresh_iterations)
+  // marks the factor as aged, and the next step or correction factorises
+  // afresh instead of running PCG on it (in a sequence an old factor's PCG
+  // grows frame by frame). false: only a failed PCG factorises.
+  bool lagged_refresh = false;
   // Polled once per iteration; returning true stops the solve with status
   // "interrupted" (the Python bindings use it for Ctrl-C).
   std::function<bool()> interrupted;

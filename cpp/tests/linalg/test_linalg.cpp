@@ -85,6 +85,26 @@ TEST(cholmod_solve_matches_dense) {
   CHECK((sol - 0.5 * ref).norm() <= 1e-9 * ref.norm());
 }
 
+TEST(factorization_flops_count_a_dense_factor_exactly) {
+  // a dense SPD matrix: L is full, sum_k k^2 = n (n + 1) (2n + 1) / 6 however
+  // CHOLMOD splits it into supernodes, and the same once simplicial
+  const int n = 120;  // flops per entry (2n + 1) / 3 above CHOLMOD's supernodal switch
+  Eigen::MatrixXd A = Eigen::MatrixXd::Random(n, n);
+  const Eigen::MatrixXd K = A * A.transpose() + n * Eigen::MatrixXd::Identity(n, n);
+  std::vector<int> p, i;
+  std::vector<double> x;
+  upper_csc(K, p, i, x);
+  CholmodFactor f;
+  f.analyze(n, p.data(), i.data());
+  const double expected = n * (n + 1.0) * (2.0 * n + 1.0) / 6.0;
+  CHECK(f.factorization_flops() == expected);
+  CHECK(f.factorize(x.data()) && !f.simplicial());
+  f.make_simplicial();
+  CHECK(f.simplicial() && f.factorization_flops() == expected);
+  CholmodFactor none;
+  CHECK(none.factorization_flops() == 0.0);
+}
+
 TEST(cholmod_simplicial_factor_solves_and_refactorises_like_the_supernodal_one) {
   std::vector<int> p, i;
   std::vector<double> x;

@@ -16,8 +16,10 @@ from .accuracy import (CERTIFY_CONTRACTION, CERTIFY_STEPS, DEFAULT_ACCURACY, FEM
 __all__ = ["Estimate", "ErrorEstimator", "ESTIMATE_LAGGED_CG"]
 
 # The error estimate's FEM corrections: PCG on the last factorisation for at
-# most this many iterations before factorising (SolverOptions::lagged_cg_iterations)
-ESTIMATE_LAGGED_CG = 25
+# most this many iterations before factorising (SolverOptions::lagged_cg_iterations),
+# and a new factorisation once a PCG solve on it costs more than about half of
+# one (SolverOptions::lagged_refresh: a sequence's later frames; DESIGN, "The FEM baselines")
+ESTIMATE_LAGGED_CG, ESTIMATE_REFRESH = 25, True
 
 
 @dataclass
@@ -80,6 +82,7 @@ class ErrorEstimator:
             # re-solves) by PCG on the last factorisation (docs/DESIGN.md, "The FEM
             # baselines: a factorisation per step, or a lagged factor")
             opts.lagged_cg_iterations = ESTIMATE_LAGGED_CG   # (without contact: its pattern changes)
+            opts.lagged_refresh = ESTIMATE_REFRESH
             if self.accuracy is not None:   # settle: FEM's accuracy-mode stop, as Solver(method="fem") sets it
                 opts.step_tol = self.step_fraction * self.accuracy * bbox_diagonal(self.model_points)
                 opts.step_tol_grad = STEP_GRAD

@@ -208,6 +208,9 @@ _TABLE = [
     Option("lagged_cg_iterations", int, 25, "fem", ("fem",),
            "with ``lagged_factor``: PCG iterations before a new factorisation",
            check=_at_least(1), must="must be >= 1"),
+    Option("lagged_refresh", bool, True, "fem", ("fem",),
+           "with ``lagged_factor``: a PCG solve longer than about half a factorisation's cost (in iterations, "
+           "from the factor's size) makes the next step factorise afresh (an aged factor's PCG grows frame by frame)"),
     Option("negative_curvature", bool, True, "fem", ("fem",),
            "near a saddle (a shape about to buckle) add the most negative curvature direction to the step",
            core="solver"),
@@ -486,6 +489,7 @@ def lower(method: str, values: dict, scene) -> Lowered:
             raise ValueError("lagged_factor does not handle contact yet (the contact pairs change the "
                              "Newton matrix's pattern); leave it off for scenes with contact")
         so.lagged_cg_iterations = int(v["lagged_cg_iterations"])
+        so.lagged_refresh = bool(v["lagged_refresh"])
         if accuracy is not None:
             # PCG's forcing term at most FEM_ACCURACY_CG_FORCING: where the step test
             # applies its steps are then Newton steps (with a looser one a soft mode
@@ -493,7 +497,8 @@ def lower(method: str, values: dict, scene) -> Lowered:
             # docs/DESIGN.md, "Accuracy mode as shipped" and "A short step is evidence
             # only when it is an accurate Newton step")
             so.lagged_cg_forcing = FEM_ACCURACY_CG_FORCING
-        settings.update(lagged_factor=True, lagged_cg_iterations=int(v["lagged_cg_iterations"]))
+        settings.update(lagged_factor=True, lagged_cg_iterations=int(v["lagged_cg_iterations"]),
+                        lagged_refresh=bool(v["lagged_refresh"]))
     eo = _emu_options(v, step, accuracy, alpha * scene.reference_shear_modulus()) if method == "emu" else None
     fem_correction = v["fem_correction"]
     if fem_correction is None:

@@ -20,6 +20,24 @@
 
 namespace emu {
 
+namespace {
+// SolverOptions::lagged_refresh: a PCG solve on the lagged factor ages it past
+// max(kRefreshMin, flops / (kRefreshFlopsPerEntry nnz)) iterations, about half
+// of what a numeric factorisation costs in PCG iterations (one iteration
+// streams the factor twice; a factorisation's BLAS-3 rate grows with its
+// supernodes). Measured on fusiform_20k and fusiform_80k (flops / nnz 360 and
+// 787), where a factorisation cost 15-17 iterations: docs/DESIGN.md, "The FEM
+// baselines: a factorisation per step, or a lagged factor".
+constexpr int kRefreshMin = 8;
+constexpr double kRefreshFlopsPerEntry = 80.0;
+
+int aged_after_iterations(const CholmodFactor& f) {
+  const double nnz = f.factor_nnz();
+  if (!(nnz > 0)) return kRefreshMin;
+  return std::max(kRefreshMin, static_cast<int>(f.factorization_flops() / (kRefreshFlopsPerEntry * nnz)));
+}
+}  // namespace
+
 FemSolver::FemSolver(const Model& model, const SolverOptions& options, PositionTerm contact)
     : model_(along_curve(model)),
       layout_(model_),
@@ -29,6 +47,7 @@ FemSolver::FemSolver(const Model& model, const SolverOptions& options, PositionT
       bones_(model_, layout_) {
   const auto t0 = Clock::now();
   factor_.analyze(pattern_.rows(), pattern_.col_ptr().data(), pattern_.row_index().data());
+  refresh_iterations_ = aged_after_iterations(factor_);
   const Eigen::Index m = model_.tets.rows();
   element_.resize(m * 144);
   values_.resize(pattern_.nnz());
@@ -170,7 +189,10 @@ constexpr double kSaddleDecrease = 1e-3;
 // rows) and gb (bone rows).
 class FemSolver::NewtonProblem {
  public:
-  NewtonProblem(FemSolver& s, const LoadCase& load, Eigen::VectorXd act, const Eigen::MatrixX3d* initial)
+  /// with_energy false: the energy is not evaluated (energy() reads 0; a
+  /// correction's single Newton step needs only the gradient and the Hessian)
+  NewtonProblem(FemSolver& s, const LoadCase& load, Eigen::VectorXd act, const Eigen::MatrixX3d* initial,
+                bool with_energy = true)
       : s_(s), load_(load), act_(std::move(act)), nd_(s.bones_.dofs()), step_(s, act_, x_, poses_, fv_, gs_, gb_, ds_, db_) {
     x_ = pinned_positions(s_.model_, load_);
     if (initial) {
@@ -181,7 +203,7 @@ class FemSolver::NewtonProblem {
     }
     poses_ = s_.bones_.begin(load_, x_, initial);
     s_.bones_.place(poses_, x_);
-    E_ = total_energy(x_, poses_);
+    if (with_energy || s_.has_contact()) E_ = total_energy(x_, poses_);
     if (s_.has_contact()) s_.contact_.check_start_state(x_, E_);
     reduced_gradient(x_, poses_, gs_, gb_);
     gn_ = s_.bones_.gradient_norm(gs_.squaredNorm(), gb_);
@@ -211,8 +233,7 @@ class FemSolver::NewtonProblem {
     const bool try_exact = s_.options_.exact_when_definite && (last_exact_ok_ || last_step_ == 1.0);
     const int factorizations0 = s_.factorizations_;
     assembled_ = -1;
-    if (s_.options_.lagged_cg_iterations > 0 && s_.lag_.valid && !s_.has_contact() &&
-        lagged_newton_step(try_exact, dir, time)) {
+    if (s_.lagged_usable() && lagged_newton_step(try_exact, dir, time)) {
       if (!try_exact) ++dir.filtered;
       last_neutral_.clear();
       dir.slope = slope();
@@ -318,6 +339,14 @@ class FemSolver::NewtonProblem {
   /// The positions of the last trial_energy call.
   const Eigen::MatrixX3d& trial_positions() const { return trial_; }
 
+  /// The positions after the full step along the current direction (no energy evaluated).
+  Eigen::MatrixX3d full_step_positions() const {
+    Eigen::MatrixX3d x;
+    BonePoses poses;
+    step_positions(1.0, x, poses);
+    return x;
+  }
+
   /// The round-off of grad_norm() here: the change of the reduced gradient
   /// when every position moves by one rounding, over sqrt 2 (two samples).
   double gradient_noise() {
@@ -372,7 +401,7 @@ class FemSolver::NewtonProblem {
     last_exact_ = exact;
     int cg = 0;  // with a lagged factor, PCG first (SolverOptions::lagged_cg_iterations)
     bool indefinite = false;
-    if (s_.options_.lagged_cg_iterations > 0 && !s_.has_contact()) {
+    if (s_.lagged_usable()) {
       if (step_.lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
       indefinite = step_.lagged_indefinite();
     }
@@ -403,7 +432,7 @@ class FemSolver::NewtonProblem {
     if (s_.has_contact()) s_.set_contact_hessian(x_);
     s_.assemble_hessian(x_, act_, true);
     last_exact_ = true;
-    if (s_.options_.lagged_cg_iterations > 0 && s_.lag_.valid && !s_.has_contact()) {
+    if (s_.lagged_usable()) {
       int cg = 0;
       if (step_.lagged_direction(true, kCorrectionResidual * gn_, cg) && slope() < 0) return true;
       if (step_.lagged_indefinite()) return false;
@@ -486,8 +515,10 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
   const Eigen::VectorXd act = tet_activation(model_, load);
   Eigen::MatrixX3d x = x0;
   const double floor = gradient_floor(act);
+  // the exact Newton step alone compares no energies
+  const bool newton_only = hessian == CorrectionHessian::LaggedNewton || hessian == CorrectionHessian::Newton;
   for (int step = 0; step < max_steps; ++step) {
-    NewtonProblem newton(*this, load, act, &x);
+    NewtonProblem newton(*this, load, act, &x, /*with_energy=*/!newton_only);
     // Where FEM's own solve would stop at once (the gradient at round-off:
     // Convergence::initial), the correction is zero: nothing is assembled or
     // factorised (a sequence's first frame at rest).
@@ -496,15 +527,14 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
       break;
     }
     // the exact Newton step alone (never a filtered one): one step, or none
-    if (hessian == CorrectionHessian::LaggedNewton || hessian == CorrectionHessian::Newton) {
+    if (newton_only) {
       const bool lagged = hessian == CorrectionHessian::LaggedNewton;
       if (!(lagged ? newton.lagged_newton_direction() : newton.exact_newton_direction()))
         throw std::runtime_error(lagged ? "no lagged Newton correction from these positions: PCG on the last "
                                           "factor did not converge or met negative curvature"
                                         : "no Newton correction from these positions: the exact Newton matrix is "
                                           "not positive definite");
-      newton.trial_energy(1.0);
-      x = newton.trial_positions();
+      x = newton.full_step_positions();
       break;
     }
     if (!newton.correction_direction(hessian != CorrectionHessian::Filtered))

@@ -80,8 +80,13 @@ class FemSolver {
   /// The model as this solver stores it (tets along_curve, tet_order.h).
   const Model& model() const { return model_; }
   double factor_nnz() const { return factor_.factor_nnz(); }
+  double factorization_flops() const { return factor_.factorization_flops(); }
   /// Numeric factorisations of the Newton matrix so far (solves and corrections).
   int factorizations() const { return factorizations_; }
+  /// PCG iterations on the lagged factor so far (solves and corrections).
+  long pcg_iterations() const { return pcg_iterations_; }
+  /// With SolverOptions::lagged_refresh: PCG iterations past which the lagged factor has aged.
+  int refresh_iterations() const { return refresh_iterations_; }
 
  private:
   class NewtonProblem;  // one solve's problem, as the Newton driver minimises it (fem_solver.cpp)
@@ -102,6 +107,10 @@ class FemSolver {
   // Contact: its energy and gradient at x (0 / zero
   // rows without contact) and the Newton matrix with its Hessian.
   bool has_contact() const { return contact_.active(); }
+  /// Whether steps and corrections run PCG on the lagged factor (it exists, has not aged, no contact).
+  bool lagged_usable() const {
+    return options_.lagged_cg_iterations > 0 && lag_.valid && !lag_.aged && !has_contact();
+  }
   double contact_energy(const Eigen::MatrixX3d& x) const;
   Eigen::MatrixX3d contact_gradient(const Eigen::MatrixX3d& x) const;
   /// contact_H_ = the contact Hessian at x, and contact_soft_ its free-vertex
@@ -128,6 +137,7 @@ class FemSolver {
   // inverse of its bone Schur complement.
   struct LaggedFactor {
     bool valid = false;
+    bool aged = false;  // its last PCG took over refresh_iterations_: the next step factorises
     Eigen::MatrixXd Hsb, Wsb, S_inv;
   };
   LaggedFactor lag_;
@@ -135,6 +145,8 @@ class FemSolver {
   MergedPatternFactor merged_factor_;  // soft block + contact, on the merged pattern
   bool use_merged_ = false;
   int factorizations_ = 0;  // numeric factorisations of the Newton matrix so far
+  int refresh_iterations_ = 0;  // SolverOptions::lagged_refresh's threshold, from the factor's size
+  long pcg_iterations_ = 0;  // PCG iterations on the lagged factor so far
   double setup_seconds_ = 0;
 };
 

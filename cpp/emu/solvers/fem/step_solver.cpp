@@ -33,7 +33,7 @@ void FemSolver::StepSolver::border(bool exact, Eigen::MatrixXd& Hsb, Eigen::Matr
 // false if the matrix is not positive definite.
 bool FemSolver::StepSolver::newton_direction(bool exact) {
   ++s_.factorizations_;
-  s_.lag_.valid = false;  // the factor is being replaced
+  s_.lag_.valid = s_.lag_.aged = false;  // the factor is being replaced
   if (!s_.factorize_newton_matrix()) return false;
   const CholmodFactor& factor = s_.newton_factor();
   y_.resize(gs_.size());
@@ -105,8 +105,10 @@ bool FemSolver::StepSolver::lagged_direction(bool exact_border, double tol, int&
   if (nd_) b.tail(nd_) = -gb_;
   const PcgResult cg = pcg_.solve(product, precondition, b, tol, s_.options_.lagged_cg_iterations, d);
   cg_iterations = cg.iterations;
+  s_.pcg_iterations_ += cg.iterations;
   lagged_indefinite_ = cg.negative_curvature;
   if (!cg.converged) return false;
+  if (s_.options_.lagged_refresh && cg.iterations > s_.refresh_iterations_) s_.lag_.aged = true;
   ds_ = d.head(ns);
   if (nd_) db_ = d.tail(nd_);
   return true;
