@@ -59,10 +59,27 @@ def state(s):
     return solver._core, load, np.asarray(x0)
 
 
+def with_inertia(core, load, x0):
+    """load with a time step's inertia (energy/inertia.h) about as stiff as the
+    elastic Newton matrix, its predicted positions off x0 at every vertex."""
+    _, H0 = testing.reduced_system(core, load, x0, True)
+    load.inertia_weight, load.inertia_target = 1.0, x0
+    _, H1 = testing.reduced_system(core, load, x0, True)
+    per_weight = np.abs(np.diag(np.asarray(H1) - np.asarray(H0))).max()
+    assert per_weight > 0   # the term reaches the Newton matrix
+    load.inertia_weight = 0.5 * np.abs(np.diag(np.asarray(H0))).max() / per_weight
+    load.inertia_target = x0 + 0.05 * np.abs(x0).max() * np.random.default_rng(7).standard_normal(x0.shape)
+    return load
+
+
+@pytest.mark.parametrize("inertia", [False, True])
 @pytest.mark.parametrize("kind", ["hinge", "ball", "free", "hinge-hinge", "ball-hinge", "free-ball"])
-def test_bone_gradient_and_bordered_hessian_match_finite_differences(kind):
+def test_bone_gradient_and_bordered_hessian_match_finite_differences(kind, inertia):
+    # with inertia: the bones' vertices' lumped masses make them rigid bodies
     s = scene(kind, stiffness=0.3)
     core, load, x0 = state(s)
+    if inertia:
+        load = with_inertia(core, load, x0)
     g, H = testing.reduced_system(core, load, x0, True)
     g, H = np.asarray(g), np.asarray(H)
     n = len(g)

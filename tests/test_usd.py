@@ -98,3 +98,31 @@ def test_without_usd_core_the_error_says_how_to_get_it(tmp_path, monkeypatch):
     with pytest.raises(ImportError, match=r"pip install emu\[usd\]"):
         emu.io.write_usd(tmp_path / "x.usd", scene, [scene.points])
     assert not emu.io.usd.usd_available()
+
+
+def test_a_time_step_run_writes_the_soft_meshes_velocities(tmp_path):
+    """emu.Dynamics time steps: each soft mesh's velocities attribute holds the
+    step's vertex velocities at its time code (motion blur in renderers)."""
+    scene = emu.scenes.fusiform(2, warn=False)
+    solver = emu.Solver(scene, "fem")
+    sols = list(emu.solve_frames(solver, [{"belly": 4e4}] * 2, dynamics=emu.Dynamics(0.1)))
+    writer = emu.io.usd.UsdWriter(str(tmp_path / "steps.usda"), scene, 0.1)
+    for k, sol in enumerate(sols):
+        writer.add_frame(k, sol.positions, velocities=sol.velocities)
+    writer.save()
+    stage = Usd.Stage.Open(str(tmp_path / "steps.usda"))
+    faces, faces_tet = boundary_faces(scene.tets, return_tets=True)
+    checked = 0
+    for prim in stage.Traverse():
+        if not prim.IsA(UsdGeom.Mesh):
+            continue
+        mesh = UsdGeom.Mesh(prim)
+        for k, sol in enumerate(sols):
+            p = np.array(mesh.GetPointsAttr().Get(k))
+            v = np.array(mesh.GetVelocitiesAttr().Get(k))
+            assert v.shape == p.shape
+            # each mesh point is a scene vertex: its velocity is that vertex's
+            rows = [int(np.argmin(np.linalg.norm(sol.positions - q, axis=1))) for q in p]
+            assert np.allclose(v, sol.velocities[rows], rtol=1e-5, atol=1e-6 * np.abs(sol.velocities).max())
+            checked += 1
+    assert checked == 2 * len([p for p in scene.parts.values() if p.kind != "bone"])

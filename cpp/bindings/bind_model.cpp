@@ -38,7 +38,10 @@ void bind_model(py::module_& m) {
       .def_readwrite("activation", &LoadCase::activation)
       .def_readwrite("pin_positions", &LoadCase::pin_positions)
       .def_readwrite("gravity", &LoadCase::gravity)
-      .def_readwrite("joint_targets", &LoadCase::joint_targets);
+      .def_readwrite("joint_targets", &LoadCase::joint_targets)
+      .def_readwrite("inertia_weight", &LoadCase::inertia_weight,
+                     "1 / h_eff^2 of an implicit time step's inertia (0: quasi-static)")
+      .def_readwrite("inertia_target", &LoadCase::inertia_target, "#V by 3 predicted positions of the step");
 }
 
 }  // namespace emu::bindings

@@ -60,6 +60,10 @@ struct LoadCase {
   Eigen::MatrixX3d pin_positions;  // #P by 3 targets of the pinned vertices (empty: rest)
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // acceleration
   Eigen::MatrixX3d joint_targets;  // #J by 3 where declared world joints are (empty: rest)
+  // An implicit time step's inertia (energy/inertia.h): weight w = 1 / h_eff^2
+  // (0: a quasi-static solve) and the #V by 3 predicted positions y.
+  double inertia_weight = 0.0;
+  Eigen::MatrixX3d inertia_target;
 };
 
 /// Full #V by 3 positions: free rows from x_free (num_free by 3), pinned rows

@@ -78,6 +78,9 @@ def _print_info(args):
     _print_bones(scene, set(spec.bones) if spec is not None else set())
     if spec is not None:
         print(f"  frames: {spec.frames} x {spec.dt:g} s; solver: {spec.solver or 'defaults'}")
+        if spec.dynamics is not None:
+            d = spec.dynamics
+            print(f"  dynamics: time steps of {d.dt:g} s, {d.integrator}, mass damping {d.mass_damping:g} / s")
         for name, curve in spec.curves.items():
             kind = "per frame" if curve.per_frame is not None else f"{len(curve.keys)} keys, {curve.interpolation}"
             print(f"  activation {name}: {kind}, {'normalised' if curve.normalized else 'absolute'}")
@@ -111,7 +114,10 @@ def _print_mesh_defects(scene, mesh_file: str) -> None:
 def _print_parts(scene) -> None:
     """emu info: each part, its material and a muscle's attachments."""
     for p in scene.parts.values():
-        print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}")
+        e = scene.points[scene.tets[p.tets]]
+        volume = float(np.abs(np.linalg.det(e[:, 1:] - e[:, :1])).sum() / 6.0)
+        print(f"  part {p.name}: {p.kind}, {len(p.tets)} tets, E = {p.youngs:g}, nu = {p.poisson:g}, "
+              f"density {p.density:g}, mass {p.density * volume:.4g} (volume {volume:.4g})")
         if p.kind == "muscle":
             att = scene.attachments(p.name)
             desc = [f"{b} ({len(v)} vertices)" for b, v in att.items()]

@@ -84,7 +84,7 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
         progress(hint)
     try:
         loads = spec.frame_loads()
-        for k, sol in enumerate(solve_frames(solver, loads)):
+        for k, sol in enumerate(solve_frames(solver, loads, dynamics=spec.dynamics)):
             act = loads[k].activation
             files.frame(k, sol, act)
             log["frames"].append(_frame_entry(spec, k, sol, act))
@@ -128,7 +128,7 @@ class _RunFiles:
         if self.faces is not None:
             write_obj(os.path.join(self.out, name + ".obj"), sol.positions, self.faces, self.groups)
         if self.usd is not None:
-            self.usd.add_frame(k, sol.positions, spec.scene.normalised_activation(act))
+            self.usd.add_frame(k, sol.positions, spec.scene.normalised_activation(act), velocities=sol.velocities)
         if self.want_preview and k in self.picks:
             self.kept[k] = sol.positions.copy()
         self.last = sol
@@ -165,7 +165,8 @@ def _frame_entry(spec: SceneSpec, k: int, sol, act: dict) -> dict:
             "accuracy_reached": sol.accuracy_reached, "fem_corrected": sol.corrected,
             "error_estimate_certified": sol.error_estimate_certified,
             "settled_by_fem": _settled(sol), "error_estimate_note": sol.error_estimate_note,
-            "inverted_tets": sol.inverted_tets, "contact": sol.contact}
+            "inverted_tets": sol.inverted_tets, "contact": sol.contact,
+            "max_speed": None if sol.velocities is None else float(np.linalg.norm(sol.velocities, axis=1).max())}
 
 
 def _progress_line(k: int, frames: int, sol, left: float) -> str:

@@ -61,6 +61,12 @@
     count = 30
     dt = 0.0333                  # seconds per frame: frame k is at time k * dt
 
+    [dynamics]                   # time steps with inertia instead of equilibria (FEM for now:
+    integrator = "bdf2"          # [solver] method = "fem"): each frame one step of frames.dt from the
+    mass_damping = 0.0           # frame before (frame 0: from rest), masses from the materials'
+                                 # densities; "bdf2" (second order) or "backward_euler" (damps
+                                 # vibrations numerically); mass_damping: Rayleigh's c, 1/s
+
     [activation.belly]           # one table per muscle; muscles not listed stay at 0
     keys = [[0.0, 0.0], [0.5, 1.0], [1.0, 0.0]]   # [time, value]; or per_frame = [...]
     interpolation = "smooth"     # "linear", "smooth" or "step"
@@ -106,6 +112,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..solve.frames import Frame
+from ..solve.dynamics import Dynamics
 from ..solve.options import METHODS, check_options, scene_file_types
 from ..core.activation import Curve
 from ..build import datasets
@@ -137,6 +144,7 @@ _SCHEMA = {
     "gravity": list,
     "solver": scene_file_types(),   # emu.options.OPTIONS: the Solver's options, written once
     "frames": {"count": int, "dt": float},
+    "dynamics": {"integrator": str, "mass_damping": float},
     "contact": {"pairs": list, "self_contact": bool, "distance": float, "stiffness": float},
     "activation": "table of tables",
     "bones": "table of tables",
@@ -165,6 +173,7 @@ class SceneSpec:
                                                   "view": None, "usd": False})
     source: str = ""
     mesh_path: str = ""                   # the mesh file mesh.path / mesh.dataset loaded ("" for built-in scenes)
+    dynamics: object = None               # an emu.Dynamics ([dynamics]): frames are time steps; None: equilibria
 
     def bone_poses(self, frame: int) -> dict:
         """{bone: (R, t)} of the scripted bones at a frame."""
@@ -279,7 +288,22 @@ def load_scene_file(path) -> SceneSpec:
             "its rest shape; make a part a muscle ([parts.<name>] kind = \"muscle\" for mesh.path / "
             "mesh.dataset), script a bone ([bones.<name>] axis, centre, angle) or set gravity")
     return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, bones=bones,
-                     output=_output_table(data.get("output", {})), source=path, mesh_path=mpath)
+                     output=_output_table(data.get("output", {})), source=path, mesh_path=mpath,
+                     dynamics=_dynamics_table(data, solver, dt))
+
+
+def _dynamics_table(data: dict, solver: dict, dt: float):
+    """[dynamics] as an emu.Dynamics stepping frames.dt, or None."""
+    if "dynamics" not in data:
+        return None
+    if solver.get("method", "emu") != "fem":
+        raise SceneFileError("[dynamics] needs [solver] method = \"fem\": time steps with inertia are not in "
+                             "EMU's solver yet")
+    table = data["dynamics"]
+    try:
+        return Dynamics(dt, table.get("integrator", "bdf2"), float(table.get("mass_damping", 0.0)))
+    except ValueError as e:
+        raise SceneFileError(str(e)) from None
 
 
 def _mesh_scene(data: dict, base: str) -> tuple:

@@ -146,10 +146,11 @@ class UsdWriter:
         tm.GetPrim().SetCustomDataByKey("emu:part", part.name)
         return tm, verts
 
-    def add_frame(self, frame: int, positions, activation: dict | None = None) -> None:
+    def add_frame(self, frame: int, positions, activation: dict | None = None, velocities=None) -> None:
         """The parts at time code ``frame``: positions (n, 3) of every mesh
         vertex; activation {muscle: normalised a} (the muscles' colour and
-        emu:activation primvar)."""
+        emu:activation primvar); velocities (n, 3) a time step's (scene units per
+        second: the soft meshes' velocities attribute, for motion blur), or None."""
         Gf, Vt, Sdf, UsdGeom = self._gf, self._vt, self._sdf, self._usdgeom
         x = np.asarray(positions, dtype=np.float64)
         for part, op, verts in self._bones:
@@ -161,6 +162,9 @@ class UsdWriter:
         for part, mesh, verts, face_tet in self._soft:
             p = x[verts]
             mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(p.astype(np.float32)), frame)
+            if velocities is not None:
+                vel = np.asarray(velocities, dtype=np.float64)[verts]
+                mesh.GetVelocitiesAttr().Set(Vt.Vec3fArray.FromNumpy(vel.astype(np.float32)), frame)
             lo, hi = p.min(axis=0), p.max(axis=0)
             mesh.GetExtentAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*lo.tolist()), Gf.Vec3f(*hi.tolist())]), frame)
             a = float((activation or {}).get(part.name, 0.0)) if part is not None and part.kind == "muscle" else 0.0

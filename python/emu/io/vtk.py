@@ -49,7 +49,8 @@ def tet_fields(scene, x: np.ndarray, fibers=None, who: str = "tet_fields") -> tu
 
 
 def write_solution(path, scene, solution, *, activation=None, fibers=None):
-    """A solved frame as a mesh: deformed points; point data displacement; cell
+    """A solved frame as a mesh: deformed points; point data displacement (and
+    velocity for a time step's solution); cell
     data part (index in scene.parts; a VTU names each part in its field data,
     "part:<name>" = index), fiber (deformed, unit), J and, if given, activation.
 
@@ -69,8 +70,11 @@ def write_solution(path, scene, solution, *, activation=None, fibers=None):
     if activation is not None:
         cell_data["activation"] = tet_activation(scene, activation)
     cell_data["J"] = J
-    write(path, x, scene.tets, cell_data=cell_data, point_data={"displacement": x - scene.points},
-          part_names=dict(enumerate(scene.parts)))
+    point_data = {"displacement": x - scene.points}
+    v = getattr(solution, "velocities", None)
+    if v is not None:   # a time step's (emu.Dynamics)
+        point_data["velocity"] = np.asarray(v, dtype=np.float64)
+    write(path, x, scene.tets, cell_data=cell_data, point_data=point_data, part_names=dict(enumerate(scene.parts)))
 
 
 def write_pvd(path, entries):

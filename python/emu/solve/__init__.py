@@ -9,6 +9,7 @@ not load the solver).
     solution   the Solution of a solve
     estimate   EMU's error estimate: FEM Newton steps at its answer and their certificate
     accuracy   accuracy mode's controller, against a small port (AccuracyPort)
-    frames     the one warm-started frame loop (solve_frames)
+    frames     the one warm-started frame loop (solve_frames), quasi-static or time steps
+    dynamics   implicit time steps: the integrators' inertia and velocities (Dynamics, MotionState)
     advice     which method is faster for a scene, by the measured crossover
 """

@@ -24,15 +24,30 @@ class Frame:
     pin_positions: object = None
 
 
-def solve_frames(solver, frames: Iterable, initial=None) -> Iterator:
+def solve_frames(solver, frames: Iterable, initial=None, dynamics=None, state=None) -> Iterator:
     """The Solution of each of ``frames`` in order (Frame objects, or activation
-    dicts), each solve warm-started from the solution before it, the first from
+    dicts), each solve warm-started from the one before, the first from
     ``initial`` (None: rest; a Solution of the same solver). A generator: a
     caller that stops early, or is interrupted, keeps the frames solved so far;
-    EMU's accuracy mode carries its alpha from frame to frame in the solver."""
+    EMU's accuracy mode carries its alpha from frame to frame in the solver.
+
+    dynamics  an emu.Dynamics: each frame is a time step of dynamics.dt seconds
+              with inertia (FEM only for now), from ``state`` (an emu.MotionState;
+              None: at rest, or at ``initial``'s positions, with zero velocities);
+              each Solution carries the ``velocities`` at its end. None:
+              quasi-static equilibria."""
     prev = initial
+    if dynamics is not None and state is None:
+        from .dynamics import MotionState
+        state = MotionState.at_rest(solver.scene.points if initial is None else initial.positions)
     for frame in frames:
         f = frame if isinstance(frame, Frame) else Frame(activation=frame)
+        inertia = None if dynamics is None else dynamics.inertia(state)
+        start = prev if dynamics is None or prev is not None else state.positions
         prev = solver.solve(f.activation, normalized=f.normalized, gravity=f.gravity,
-                            pin_positions=f.pin_positions, bone_poses=f.bone_poses or None, initial=prev)
+                            pin_positions=f.pin_positions, bone_poses=f.bone_poses or None, initial=start,
+                            inertia=inertia)
+        if dynamics is not None:
+            state = dynamics.advance(state, prev.positions)
+            prev.velocities = state.velocities
         yield prev

@@ -93,6 +93,27 @@ def load_case(scene, activation=None, normalized=False, gravity=None, pin_positi
     return load
 
 
+def set_inertia(load, scene, method: str, inertia) -> None:
+    """load's inertia from (w, y): a time step's weight 1 / h_eff^2 and (n, 3)
+    predicted positions (emu.solve.dynamics)."""
+    if method != "fem":
+        raise ValueError("dynamics (a time step's inertia) is not in EMU's solver yet: use method='fem' for time "
+                         "steps (quasi-static solves take either method)")
+    try:
+        w, y = inertia
+        w = float(w)
+    except (TypeError, ValueError):
+        raise TypeError("inertia must be (weight, predicted positions): 1 / h^2 and an (n, 3) array") from None
+    y = np.asarray(y, dtype=np.float64)
+    if not (np.isfinite(w) and w >= 0):
+        raise ValueError(f"the inertia weight must be finite and >= 0 (1 / h^2 of a time step), got {w!r}")
+    if y.shape != (len(scene.points), 3) or not np.all(np.isfinite(y)):
+        raise ValueError(f"the inertia's predicted positions must be a finite ({len(scene.points)}, 3) array, "
+                         f"got shape {y.shape}")
+    load.inertia_weight = w
+    load.inertia_target = y
+
+
 def _bone_targets(scene, bone_poses, ids, targets):
     """targets (the pinned vertices ids' positions) with the vertices of scripted
     bones moved: x = R X + t for each {bone: (R, t)}."""

@@ -68,6 +68,8 @@ class Solution:
     accuracy_reached  EMU with ``accuracy=``: whether the error estimate ended
                 within the accuracy asked for (False: an AccuracyWarning, and
                 error_estimate_note says by how much it missed); None otherwise
+    velocities  a time step's (solve_frames with dynamics=emu.Dynamics): (n, 3) vertex velocities
+                at its end; None for a quasi-static solve
     phase_times seconds per phase of the solve, summing to time_s: hessian
                 (element Hessian blocks; FEM: and their assembly), preconditioner
                 (EMU: its rebuilds and the bone coarse space), linear_solve (FEM:
@@ -109,6 +111,7 @@ class Solution:
     fem_steps: list | None = field(default=None, repr=False)
     contact: dict | None = None      # scenes with contact: active pairs and minimum gap at positions
     solve_time_s: float = 0.0        # the solver's iterations alone (time_s: the whole solve)
+    velocities: np.ndarray | None = field(default=None, repr=False)  # time steps (emu.Dynamics): (n, 3)
 
     def __repr__(self) -> str:
         """One line: what a result is, not its arrays (positions, history: the fields)."""

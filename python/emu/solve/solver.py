@@ -22,7 +22,7 @@ from ..core.runtime import adapt_threads, set_threads
 from ..model.scene import Scene
 from .accuracy import ACCURACY_CG_FORCING, AccuracyMode, AccuracyWarning
 from .estimate import Estimate, ErrorEstimator
-from .load import ActivationWarning, activation_vector, load_case, start_array
+from .load import ActivationWarning, activation_vector, load_case, set_inertia, start_array
 from .options import (CHOICES, METHODS, OPTIONS, OptionGroup, check_options, lower, merge_groups, options_text,
                       solver_signature)
 from .solution import Solution, solution_of
@@ -139,7 +139,8 @@ class Solver:
                          self._warned_activation)
 
     def solve(self, activation=None, *, normalized: bool = False, gravity=None, pin_positions=None,
-              bone_poses=None, initial=None, on_iteration=None, record_iterates: bool = False) -> Solution:
+              bone_poses=None, initial=None, on_iteration=None, record_iterates: bool = False,
+              inertia=None) -> Solution:
         """Equilibrium under the given activations.
 
         activation    {muscle: a} absolute activation (or in [0, 1] with normalized=True)
@@ -155,8 +156,13 @@ class Solver:
                       raises stops it and propagates.
         record_iterates  keep (time_s, positions) of every iterate in Solution.iterates (a
                       FEM-corrected answer last, at the solve's time plus its estimates')
+        inertia       a time step's inertia (w, y): the weight 1 / h_eff^2 and the (n, 3)
+                      predicted positions of an implicit integrator (emu.solve.dynamics;
+                      solve_frames(..., dynamics=emu.Dynamics(dt)) sets them); FEM only
         """
         load = self.load_case(activation, normalized, gravity, pin_positions, bone_poses)
+        if inertia is not None:
+            set_inertia(load, self.scene, self.method, inertia)
         if on_iteration is not None and not callable(on_iteration):
             raise TypeError(f"on_iteration must be callable, got {type(on_iteration).__name__}")
         iterates = [] if record_iterates else None

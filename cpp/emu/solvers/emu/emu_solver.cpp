@@ -149,6 +149,9 @@ void EmuSolver::set_cg_forcing_max(double eta_max) {
 
 EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   validate_load(model_, load);
+  if (load.inertia_weight > 0)
+    throw std::invalid_argument("dynamics (a time step's inertia) is not in EMU's solver yet: use method='fem' "
+                                "for time steps, or a quasi-static solve with EMU");
   Context c;
   c.act = tet_activation(model_, load);
   c.x_pinned = pinned_positions(model_, load);

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "emu/energy/gravity_work.h"
+#include "emu/energy/inertia.h"
 #include "emu/solvers/elastic_term.h"
 #include "emu/linalg/negative_curvature.h"
 #include "emu/model/tet_order.h"
@@ -51,6 +52,10 @@ FemSolver::FemSolver(const Model& model, const SolverOptions& options, PositionT
   const Eigen::Index m = model_.tets.rows();
   element_.resize(m * 144);
   values_.resize(pattern_.nnz());
+  diagonal_.assign(pattern_.rows(), -1);
+  for (int j = 0; j < pattern_.rows(); ++j)
+    for (int k = pattern_.col_ptr()[j]; k < pattern_.col_ptr()[j + 1]; ++k)
+      if (pattern_.row_index()[k] == j) diagonal_[j] = k;
   corner_.resize(m * 12);
   tet_energy_.resize(m);
   setup_seconds_ = seconds_since(t0);
@@ -65,8 +70,8 @@ std::vector<std::pair<std::string, double>> FemSolver::structures() const {
   return out;
 }
 
-double FemSolver::energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act,
-                              const Eigen::Vector3d& grav) const {
+double FemSolver::energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const LoadCase& load) const {
+  const Eigen::Vector3d& grav = load.gravity;
   const Eigen::Index m = model_.tets.rows();
   const auto& geo = layout_.geometry;
   const ElasticTerm elastic(model_, layout_, act);
@@ -76,7 +81,25 @@ double FemSolver::energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& 
   double E = 0;
   for (Eigen::Index t = 0; t < m; ++t) E += tet_energy_[t];  // fixed order: reproducible
   if (grav.squaredNorm() > 0) E -= gravity_work::energy(layout_.lumped_mass, x, grav);
+  if (load.inertia_weight > 0) E += inertia::energy(layout_.lumped_mass, x, load.inertia_target, load.inertia_weight);
   return E;
+}
+
+void FemSolver::set_inertia(const LoadCase& load) {
+  inertia_weight_ = load.inertia_weight;
+  if (!(inertia_weight_ > 0) || bones_.dofs() == 0) {
+    bone_inertia_.resize(0, 0);
+    return;
+  }
+  // the bones' vertices: their inertia turns and moves the bone (RigidBones::add_vertex_hessian)
+  std::vector<Eigen::Triplet<double>> diag;
+  for (Eigen::Index v = 0; v < model_.rest.rows(); ++v)
+    if (layout_.vertex_bone(v) >= 0 && layout_.free_index(v) < 0)
+      for (int c = 0; c < 3; ++c)
+        diag.emplace_back(3 * v + c, 3 * v + c, inertia::vertex_hessian(layout_.lumped_mass(v), inertia_weight_));
+  const int n = static_cast<int>(3 * model_.rest.rows());
+  bone_inertia_.resize(n, n);
+  bone_inertia_.setFromTriplets(diag.begin(), diag.end());
 }
 
 void FemSolver::free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x,
@@ -98,6 +121,11 @@ void FemSolver::free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x,
   if (load.gravity.squaredNorm() > 0)
     for (Eigen::Index v = 0; v < model_.rest.rows(); ++v)
       if (layout_.free_index(v) >= 0) g.segment<3>(3 * layout_.free_index(v)) -= gravity_work::vertex_gradient(layout_.lumped_mass(v), load.gravity);
+  if (load.inertia_weight > 0)
+    for (Eigen::Index v = 0; v < model_.rest.rows(); ++v)
+      if (layout_.free_index(v) >= 0)
+        g.segment<3>(3 * layout_.free_index(v)) += inertia::vertex_gradient(
+            layout_.lumped_mass(v), x.row(v).transpose(), load.inertia_target.row(v).transpose(), load.inertia_weight);
 }
 
 void FemSolver::assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, bool exact) {
@@ -117,9 +145,17 @@ void FemSolver::assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorX
     Eigen::Map<Mat12>(element_.data() + t * 144) = geo.volume(t) * position_hessian(geo.grad[t], H);
   }
   pattern_.assemble(element_.data(), values_.data());
+  if (inertia_weight_ > 0)
+    for (Eigen::Index v = 0; v < model_.rest.rows(); ++v) {
+      const int f = layout_.free_index(v);
+      if (f < 0) continue;
+      const double h = inertia::vertex_hessian(layout_.lumped_mass(v), inertia_weight_);
+      for (int c = 0; c < 3; ++c) values_[diagonal_[3 * f + c]] += h;
+    }
 }
 
-void FemSolver::vertex_forces(const Eigen::Vector3d& grav, Eigen::MatrixX3d& f) const {
+void FemSolver::vertex_forces(const LoadCase& load, const Eigen::MatrixX3d& x, Eigen::MatrixX3d& f) const {
+  const Eigen::Vector3d& grav = load.gravity;
   f = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
   for (int t : bones_.touching_tets())
     for (int a = 0; a < 4; ++a) {
@@ -129,6 +165,12 @@ void FemSolver::vertex_forces(const Eigen::Vector3d& grav, Eigen::MatrixX3d& f) 
   if (grav.squaredNorm() > 0)
     for (Eigen::Index v = 0; v < f.rows(); ++v)
       if (layout_.vertex_bone(v) >= 0) f.row(v) -= gravity_work::vertex_gradient(layout_.lumped_mass(v), grav).transpose();
+  if (load.inertia_weight > 0)
+    for (Eigen::Index v = 0; v < f.rows(); ++v)
+      if (layout_.vertex_bone(v) >= 0)
+        f.row(v) += inertia::vertex_gradient(layout_.lumped_mass(v), x.row(v).transpose(),
+                                             load.inertia_target.row(v).transpose(), load.inertia_weight)
+                        .transpose();
 }
 
 double FemSolver::contact_energy(const Eigen::MatrixX3d& x) const {
@@ -194,6 +236,7 @@ class FemSolver::NewtonProblem {
   NewtonProblem(FemSolver& s, const LoadCase& load, Eigen::VectorXd act, const Eigen::MatrixX3d* initial,
                 bool with_energy = true)
       : s_(s), load_(load), act_(std::move(act)), nd_(s.bones_.dofs()), step_(s, act_, x_, poses_, fv_, gs_, gb_, ds_, db_) {
+    s_.set_inertia(load_);  // the step's inertia in this solve's Newton matrices
     x_ = pinned_positions(s_.model_, load_);
     if (initial) {
       if (initial->rows() != x_.rows() || !initial->allFinite())
@@ -325,7 +368,7 @@ class FemSolver::NewtonProblem {
   /// The total energy at positions x with the bones at poses: elastic, fibre and
   /// gravity terms (energy_with), the bones' joint springs and contact; summed here only.
   double total_energy(const Eigen::MatrixX3d& x, const BonePoses& poses) const {
-    return s_.energy_with(x, act_, load_.gravity) + s_.bones_.spring_energy(poses) + s_.contact_energy(x);
+    return s_.energy_with(x, act_, load_) + s_.bones_.spring_energy(poses) + s_.contact_energy(x);
   }
 
   double trial_energy(double s) {
@@ -461,7 +504,7 @@ class FemSolver::NewtonProblem {
         if (L.free_index(v) >= 0) gs.segment<3>(3 * L.free_index(v)) += gc.row(v).transpose();
     }
     if (!nd_) return;
-    s_.vertex_forces(load_.gravity, fv_);
+    s_.vertex_forces(load_, x, fv_);
     if (s_.has_contact())
       for (Eigen::Index v = 0; v < x.rows(); ++v)
         if (s_.layout_.vertex_bone(v) >= 0) fv_.row(v) += gc.row(v);

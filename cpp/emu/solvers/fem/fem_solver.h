@@ -95,12 +95,15 @@ class FemSolver {
   /// The free rows of the gradient (3 #free) at x; fills the corner forces that vertex_forces reads.
   void free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x, const Eigen::VectorXd& act,
                      Eigen::VectorXd& g) const;
-  double energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const Eigen::Vector3d& grav) const;
+  /// The elastic energy less gravity's work plus the step's inertia (load.inertia_weight > 0) at x.
+  double energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, const LoadCase& load) const;
+  /// The load's inertia for the following assemblies (assemble_hessian, the bones' border).
+  void set_inertia(const LoadCase& load);
   /// Element Hessians (144 per tet) at x and the assembled soft block.
   void assemble_hessian(const Eigen::MatrixX3d& x, const Eigen::VectorXd& act, bool exact);
   /// dE/dx at the vertices that move with a bone, from the corner forces of the
-  /// last free_gradient call (#V by 3, zero elsewhere).
-  void vertex_forces(const Eigen::Vector3d& grav, Eigen::MatrixX3d& f) const;
+  /// last free_gradient call, gravity and the inertia at positions x (#V by 3, zero elsewhere).
+  void vertex_forces(const LoadCase& load, const Eigen::MatrixX3d& x, Eigen::MatrixX3d& f) const;
   /// The round-off level of the gradient norm (see Convergence).
   double gradient_floor(const Eigen::VectorXd& act) const;
 
@@ -130,6 +133,9 @@ class FemSolver {
   CholmodFactor factor_;
   RigidBones bones_;
   std::vector<double> element_, values_;
+  std::vector<int> diagonal_;  // 3 #free: where each free row's diagonal entry is in values_
+  double inertia_weight_ = 0;  // set_inertia: w of the load being solved (0: none)
+  Eigen::SparseMatrix<double> bone_inertia_;  // its Hessian at the bones' vertices (3 #V square, diagonal)
   mutable std::vector<double> corner_, tet_energy_;
   // The last successful factorisation, kept as Newton-CG's preconditioner
   // (SolverOptions::lagged_cg_iterations) across steps and solves: the factor

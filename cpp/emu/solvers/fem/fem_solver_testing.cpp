@@ -6,7 +6,7 @@ namespace emu {
 
 double FemSolverTesting::energy(const FemSolver& s, const LoadCase& load, const Eigen::MatrixX3d& x) {
   validate_load(s.model_, load);
-  return s.energy_with(x, tet_activation(s.model_, load), load.gravity) + s.contact_energy(x);
+  return s.energy_with(x, tet_activation(s.model_, load), load) + s.contact_energy(x);
 }
 
 Eigen::MatrixX3d FemSolverTesting::gradient(const FemSolver& s, const LoadCase& load, const Eigen::MatrixX3d& x) {

@@ -27,6 +27,7 @@ FemSolver::StepSolver::StepSolver(FemSolver& s, const Eigen::VectorXd& act, cons
 void FemSolver::StepSolver::border(bool exact, Eigen::MatrixXd& Hsb, Eigen::MatrixXd& Hbb) {
   s_.bones_.assemble_border(poses_, s_.element_, x_, fv_, exact, Hsb, Hbb);
   if (s_.has_contact()) s_.bones_.add_vertex_hessian(poses_, x_, s_.contact_H_, Hsb, Hbb);
+  if (s_.bone_inertia_.size()) s_.bones_.add_vertex_hessian(poses_, x_, s_.bone_inertia_, Hsb, Hbb);
 }
 
 // The Newton direction from the assembled soft block and the bone border;

@@ -1,0 +1,118 @@
+"""The integrators (emu.Dynamics, FEM) on a bar's first vibration and on a
+forearm swinging under gravity.
+
+1. The bar: the built-in fusiform muscle pinned at one end, released at rest
+   from a small displacement along its first mode (linear regime), three
+   periods: the period and the amplitude kept per period against the mesh's
+   own generalised eigenproblem K v = w^2 M v (K: FEM's Newton matrix at rest,
+   M: the lumped masses), for steps per period from coarse to fine.
+2. The swing: the built-in arm (emu.scenes.arm(1): forearm on a hinge, two
+   passive muscles) released from its rest shape under gravity, one second:
+   the energy (elastic, gravity's, kinetic with the lumped masses) lost as a
+   fraction of what the swing has (start less the static equilibrium), the
+   forearm's angle range in the last quarter second against the first, and
+   whether the energy ever rose above its start.
+
+    python bench/studies/dynamics_bar.py [--resolution 2] [--steps 10 24 50 100] [--periods 3]
+        [--swing-dt 0.01 0.005]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+import numpy as np
+import scipy.linalg
+
+import emu
+from emu._core import testing
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
+from bench_scenes import start_run  # noqa: E402
+
+
+def lumped_masses(scene) -> np.ndarray:
+    e = scene.points[scene.tets]
+    vol = np.abs(np.linalg.det(e[:, 1:] - e[:, :1])) / 6.0
+    rho = np.zeros(len(scene.tets))
+    for part in scene.parts.values():
+        rho[part.tets] = part.density
+    m = np.zeros(len(scene.points))
+    np.add.at(m, scene.tets.ravel(), np.repeat(0.25 * rho * vol, 4))
+    return m
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--resolution", type=int, default=2)
+    ap.add_argument("--steps", type=int, nargs="*", default=[10, 24, 50, 100])
+    ap.add_argument("--periods", type=int, default=3)
+    ap.add_argument("--swing-dt", type=float, nargs="*", default=[0.01, 0.005])
+    ap.add_argument("--threads", type=int, default=1)
+    a = ap.parse_args(argv)
+    start_run(a.threads)
+    bar(a)
+    swing(a)
+
+
+def bar(a):
+    scene = emu.scenes.fusiform(a.resolution, warn=False)
+    solver = emu.Solver(scene, "fem", rtol_grad=1e-10)
+    _, K = testing.reduced_system(solver._core, solver.load_case({}), scene.points, True)
+    free = np.setdiff1d(np.arange(len(scene.points)), scene.pinned)
+    M = np.repeat(lumped_masses(scene)[free], 3)
+    w2, V = scipy.linalg.eigh(np.asarray(K), np.diag(M), subset_by_index=[0, 0])
+    period, mode = 2 * np.pi / np.sqrt(w2[0]), V[:, 0]
+    print(f"fusiform r={a.resolution}: {len(scene.tets)} tets; first period {period:.4g} s (eigenproblem)\n")
+    print("| integrator | steps per period | period / exact | amplitude kept per period | Newton per step |")
+    print("|---|---|---|---|---|")
+    amp = 1e-3 * np.abs(scene.points).max() / np.abs(mode).max()
+    x0 = scene.points.copy()
+    x0[free] += amp * mode.reshape(-1, 3)
+    for integrator in ("backward_euler", "bdf2"):
+        for n in a.steps:
+            dyn = emu.Dynamics(period / n, integrator)
+            q, newton = [(x0 - scene.points)[free].ravel() @ (M * mode)], 0
+            for sol in emu.solve_frames(solver, [{}] * (n * a.periods), dynamics=dyn,
+                                        state=emu.MotionState.at_rest(x0)):
+                q.append((sol.positions - scene.points)[free].ravel() @ (M * mode))
+                newton += sol.iterations
+            q = np.array(q)
+            z = [k + q[k] / (q[k] - q[k + 1]) for k in range(len(q) - 1) if q[k] * q[k + 1] < 0]
+            measured = 2 * np.mean(np.diff(z)) * dyn.dt if len(z) >= 3 else float("nan")
+            kept = (np.abs(q[-n:]).max() / abs(q[0])) ** (1.0 / (a.periods - 1)) if a.periods > 1 else float("nan")
+            print(f"| {integrator} | {n} | {measured / period:.4f} | {kept:.3f} | {newton / len(q[1:]):.1f} |")
+
+
+
+def swing(a):
+    scene = emu.scenes.arm(1)
+    scene.gravity = np.array([0.0, -9.81, 0.0])
+    m = lumped_masses(scene)
+    solver = emu.Solver(scene, "fem", rtol_grad=1e-10)
+    load = solver.load_case({})
+    energy = lambda x, v: testing.energy(solver._core, load, x) + 0.5 * np.sum(m[:, None] * v ** 2)  # noqa: E731
+    e0 = energy(scene.points, np.zeros_like(scene.points))
+    e_static = testing.energy(solver._core, load, solver.solve({}).positions)
+    print(f"\nthe arm's forearm released under gravity (arm(1), {len(scene.tets)} tets), 1 s; swing energy "
+          f"{e0 - e_static:.3g} J\n")
+    print("| integrator | dt s | energy lost / swing energy | angle range last 0.25 s / first 0.25 s | "
+          "energy above start | Newton per step |")
+    print("|---|---|---|---|---|---|")
+    for integrator in ("backward_euler", "bdf2"):
+        for dt in a.swing_dt:
+            n = int(round(1.0 / dt))
+            angles, energies, newton = [], [], 0
+            for sol in emu.solve_frames(solver, [{}] * n, dynamics=emu.Dynamics(dt, integrator)):
+                angles.append(emu.bone_angle(scene, sol.positions, "forearm"))
+                energies.append(energy(sol.positions, sol.velocities))
+                newton += sol.iterations
+            q = max(1, n // 4)
+            first, last = np.ptp(angles[:q]), np.ptp(angles[-q:])
+            print(f"| {integrator} | {dt:g} | {(e0 - energies[-1]) / (e0 - e_static):.2f} | {last / first:.2f} | "
+                  f"{max(energies) - e0:.2g} | {newton / n:.1f} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,27 @@
+#pragma once
+// The inertia of an implicit time step, as an incremental potential on lumped
+// vertex masses (the solvers minimise E - W + I):
+//   I(x) = (w / 2) sum_v m_v |x_v - y_v|^2,
+//   dI/dx_v = w m_v (x_v - y_v),   d2I/dx_v2 = w m_v I3,
+// y the step's predicted positions and w = 1 / h_eff^2 (backward Euler: y =
+// x_n + h v_n, h_eff = h; BDF2: y = (4 x_n - x_{n-1}) / 3 + h (8 v_n - 2 v_{n-1}) / 9,
+// h_eff = 2h / 3; mass-proportional damping folded into w and y by the caller:
+// emu.solve.dynamics).
+#include <Eigen/Core>
+
+namespace emu::inertia {
+
+/// mass  #V lumped masses;  x, y  #V by 3 positions and predicted positions;  w  1 / h_eff^2.
+inline double energy(const Eigen::VectorXd& mass, const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& y, double w) {
+  return 0.5 * w * (mass.array() * (x - y).rowwise().squaredNorm().array()).sum();
+}
+
+/// dI/dx_v for a vertex of mass m at x with predicted position y.
+inline Eigen::Vector3d vertex_gradient(double m, const Eigen::Vector3d& x, const Eigen::Vector3d& y, double w) {
+  return w * m * (x - y);
+}
+
+/// The vertex's Hessian block is this times the 3 x 3 identity.
+inline double vertex_hessian(double m, double w) { return w * m; }
+
+}  // namespace emu::inertia

@@ -1,0 +1,216 @@
+"""Implicit time steps (emu.Dynamics, solve_frames(..., dynamics=...)): inertia
+as an incremental potential in FEM's Newton solve (energy/inertia.h).
+
+The bar's first vibration against the mesh's own generalised eigenproblem
+K v = w^2 M v (K: FEM's Newton matrix at rest, M: lumped masses computed here
+from the rest volumes and densities), the quasi-static limit, the integrators'
+velocities, and the errors a user meets. The inertia's derivatives with
+movable bones are checked by finite differences in test_fem_rigid_bones.py."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+import emu
+from emu._core import testing
+from conftest import rest_geometry
+
+
+def lumped_masses(scene) -> np.ndarray:
+    """(n,) a quarter of each tet's mass (density x rest volume) at each of its vertices."""
+    vol, _ = rest_geometry(scene.points, scene.tets)
+    rho = np.zeros(len(scene.tets))
+    for part in scene.parts.values():
+        rho[part.tets] = part.density
+    m = np.zeros(len(scene.points))
+    np.add.at(m, scene.tets.ravel(), np.repeat(0.25 * rho * np.abs(vol), 4))
+    return m
+
+
+@pytest.fixture(scope="module")
+def bar():
+    """The small fusiform (pinned at one end), its free vertices, lumped mass
+    rows M (3 per free vertex) and its first mode (period, M-normalised shape)."""
+    scene = emu.scenes.fusiform(2, warn=False)
+    solver = emu.Solver(scene, "fem", rtol_grad=1e-10)
+    _, K = testing.reduced_system(solver._core, solver.load_case({}), scene.points, True)
+    free = np.setdiff1d(np.arange(len(scene.points)), scene.pinned)
+    M = np.repeat(lumped_masses(scene)[free], 3)
+    w2, V = scipy.linalg.eigh(np.asarray(K), np.diag(M), subset_by_index=[0, 0])
+    return scene, solver, free, M, 2 * np.pi / np.sqrt(w2[0]), V[:, 0]
+
+
+def vibrate(bar, integrator, steps_per_period=100, periods=3):
+    """The first mode's coordinate q = v^T M (x - X) over time, from a small
+    displacement along it at rest: (q per step, the step)."""
+    scene, solver, free, M, period, mode = bar
+    amp = 1e-3 * np.abs(scene.points).max() / np.abs(mode).max()
+    x0 = scene.points.copy()
+    x0[free] += amp * mode.reshape(-1, 3)
+    dyn = emu.Dynamics(period / steps_per_period, integrator)
+    q = [(x0 - scene.points)[free].ravel() @ (M * mode)]
+    for sol in emu.solve_frames(solver, [{}] * (steps_per_period * periods), dynamics=dyn,
+                                state=emu.MotionState.at_rest(x0)):
+        assert sol.converged and sol.velocities is not None
+        q.append((sol.positions - scene.points)[free].ravel() @ (M * mode))
+    return np.array(q), dyn.dt
+
+
+def measured_period(q, dt):
+    """Twice the mean spacing of q's zero crossings (linear interpolation)."""
+    z = [k + q[k] / (q[k] - q[k + 1]) for k in range(len(q) - 1) if q[k] * q[k + 1] < 0]
+    assert len(z) >= 4
+    return 2 * np.mean(np.diff(z)) * dt
+
+
+def test_bdf2_keeps_the_first_vibration_period_and_amplitude(bar):
+    period = bar[4]
+    q, dt = vibrate(bar, "bdf2")
+    assert measured_period(q, dt) == pytest.approx(period, rel=0.02)
+    # second order: after three periods at 100 steps each the amplitude is kept within 2%
+    assert np.abs(q[-100:]).max() / abs(q[0]) == pytest.approx(1.0, abs=0.02)
+
+
+def test_backward_euler_damps_the_vibration_at_the_same_period(bar):
+    period = bar[4]
+    q, dt = vibrate(bar, "backward_euler")
+    assert measured_period(q, dt) == pytest.approx(period, rel=0.02)
+    decay = np.abs(q[-100:]).max() / abs(q[0])   # first order: numerical damping (docs: about 0.67)
+    assert 0.3 < decay < 0.9
+
+
+def test_velocities_follow_the_integrators_formulas(bar):
+    scene, solver = bar[0], bar[1]
+    for integrator in ("backward_euler", "bdf2"):
+        dyn = emu.Dynamics(0.05, integrator)
+        sols = list(emu.solve_frames(solver, [{"belly": 3e4}] * 3, dynamics=dyn))
+        x = [scene.points] + [s.positions for s in sols]
+        assert np.allclose(sols[0].velocities, (x[1] - x[0]) / dyn.dt)   # the first step: backward Euler's
+        expected = (x[2] - x[1]) / dyn.dt if integrator == "backward_euler" else \
+            (3 * x[2] - 4 * x[1] + x[0]) / (2 * dyn.dt)
+        assert np.allclose(sols[1].velocities, expected)
+        assert np.abs(sols[1].velocities).max() > 0
+
+
+def test_the_quasi_static_limit_gives_the_equilibrium():
+    # massless parts: no inertia, each step is the equilibrium to round-off;
+    # an enormous step: the inertia's weight 1/h^2 vanishes against the stiffness
+    act = {"belly": 5e4}
+    massless = emu.scenes.fusiform(2, warn=False)
+    for part in massless.parts.values():
+        part.density = 0.0
+    for scene, dt, tol in ((massless, 0.01, 1e-12), (emu.scenes.fusiform(2, warn=False), 1e6, 1e-6)):
+        solver = emu.Solver(scene, "fem", rtol_grad=1e-10)
+        static = solver.solve(act)
+        step = next(emu.solve_frames(solver, [act], dynamics=emu.Dynamics(dt)))
+        assert step.converged
+        assert emu.vertex_error(step.positions, static.positions) < tol
+
+
+def test_mass_damping_lowers_the_vibration_further(bar):
+    scene, solver, free, M, period, mode = bar
+    amp = 1e-3 * np.abs(scene.points).max() / np.abs(mode).max()
+    x0 = scene.points.copy()
+    x0[free] += amp * mode.reshape(-1, 3)
+    ends = []
+    for c in (0.0, 0.2):
+        dyn = emu.Dynamics(period / 50, "bdf2", mass_damping=c)
+        *_, last = emu.solve_frames(solver, [{}] * 100, dynamics=dyn, state=emu.MotionState.at_rest(x0))
+        ends.append(np.abs(last.velocities).max() + np.abs(last.positions - scene.points).max() / period)
+    # c = 0.2 / s over two periods of 13.7 s: the amplitude falls by about exp(-c t / 2) = 0.06
+    assert ends[1] < 0.2 * ends[0]
+
+
+def test_bad_dynamics_input_is_named():
+    scene = emu.scenes.fusiform(2, warn=False)
+    with pytest.raises(ValueError, match="dt must be a positive"):
+        emu.Dynamics(0.0)
+    with pytest.raises(ValueError, match="integrator must be one of"):
+        emu.Dynamics(0.01, "rk4")
+    with pytest.raises(ValueError, match="mass_damping must be >= 0"):
+        emu.Dynamics(0.01, mass_damping=-1.0)
+    with pytest.raises(ValueError, match="not in EMU's solver yet: use method='fem'"):
+        next(emu.solve_frames(emu.Solver(scene, "emu"), [{}], dynamics=emu.Dynamics(0.01)))
+    fem = emu.Solver(scene, "fem")
+    with pytest.raises(ValueError, match=r"predicted positions must be a finite \(81, 3\) array"):
+        fem.solve({}, inertia=(1.0, np.zeros((3, 3))))
+    with pytest.raises(ValueError, match="weight must be finite and >= 0"):
+        fem.solve({}, inertia=(-1.0, scene.points))
+    with pytest.raises(ValueError, match="velocities must be a finite array"):
+        emu.MotionState.at_rest(scene.points, np.zeros((2, 3)))
+
+
+SCENE_FILE = """
+pins = ["proximal"]
+
+[mesh.fusiform]
+tets = 300
+
+[solver]
+method = "{method}"
+
+[frames]
+count = 4
+dt = 0.1
+
+[dynamics]
+integrator = "backward_euler"
+mass_damping = 0.5
+
+[activation.belly]
+keys = [[0.0, 0.0], [0.3, 1.0]]
+normalized = true
+
+[output]
+obj = false
+preview = false
+"""
+
+
+def test_a_scene_file_runs_time_steps_and_writes_velocities(tmp_path):
+    import json
+    import meshio
+    path = tmp_path / "jiggle.toml"
+    path.write_text(SCENE_FILE.format(method="fem"))
+    spec = emu.load_scene_file(path)
+    assert spec.dynamics == emu.Dynamics(0.1, "backward_euler", 0.5)
+    log = emu.run_scene(spec, str(tmp_path / "out"), progress=lambda *_: None)
+    x = [spec.scene.points] + [meshio.read(tmp_path / "out" / f"frame_{k:04d}.vtu").points for k in range(4)]
+    for k in range(1, 5):
+        v = meshio.read(tmp_path / "out" / f"frame_{k - 1:04d}.vtu").point_data["velocity"]
+        assert np.allclose(v, (x[k] - x[k - 1]) / 0.1, atol=1e-9 * np.abs(v).max())   # backward Euler's
+        assert log["frames"][k - 1]["max_speed"] == pytest.approx(np.linalg.norm(v, axis=1).max())
+    assert json.loads((tmp_path / "out" / "log.json").read_text())["frames"][-1]["max_speed"] > 0
+    path.write_text(SCENE_FILE.format(method="emu"))
+    with pytest.raises(emu.SceneFileError, match=r"\[dynamics\] needs \[solver\] method = \"fem\""):
+        emu.load_scene_file(path)
+    path.write_text(SCENE_FILE.format(method="fem").replace('"backward_euler"', '"leapfrog"'))
+    with pytest.raises(emu.SceneFileError, match="integrator must be one of"):
+        emu.load_scene_file(path)
+
+
+def test_a_forearm_swings_under_gravity_and_energy_never_rises():
+    # the arm released from its rest shape under gravity: the forearm (a rigid
+    # body on its hinge) swings about the static angle; BDF2 keeps the swing,
+    # backward Euler damps it out, and neither gains energy (elastic, gravity's,
+    # kinetic with the lumped masses) over its start
+    scene = emu.scenes.arm(1)
+    scene.gravity = np.array([0.0, -9.81, 0.0])
+    m = lumped_masses(scene)
+    solver = emu.Solver(scene, "fem", rtol_grad=1e-10)
+    load = solver.load_case({})
+    static = emu.bone_angle(scene, solver.solve({}).positions, "forearm")
+    e0 = testing.energy(solver._core, load, scene.points)
+    ranges = {}
+    for integrator in ("backward_euler", "bdf2"):
+        angles = []
+        for sol in emu.solve_frames(solver, [{}] * 100, dynamics=emu.Dynamics(0.005, integrator)):
+            assert sol.converged
+            e = testing.energy(solver._core, load, sol.positions) + 0.5 * np.sum(m[:, None] * sol.velocities ** 2)
+            assert e <= e0 + 1e-9 * abs(e0)
+            angles.append(emu.bone_angle(scene, sol.positions, "forearm"))
+        assert min(angles) < static < max(angles)   # it passes the static angle
+        ranges[integrator] = np.ptp(angles[-25:]) / np.ptp(angles[:25])
+    assert ranges["bdf2"] > 0.8   # (docs: 0.96 at this step)
+    assert ranges["backward_euler"] < 0.3 * ranges["bdf2"]
