@@ -12,7 +12,11 @@ run is its own process, so its peak RSS is its own (the scene alone is
 printed beside it).
 
     python bench/shipped.py [--scenes fusiform_6k arm_r5 ...] [--threads 1 2] [--accuracy 0.01 0.005]
-                            [--frames 25] [--hindsight] [--out bench/shipped]
+                            [--frames 25] [--dynamics 0.0417] [--hindsight] [--out bench/shipped]
+
+--dynamics DT (with --frames) makes every frame a BDF2 time step of DT seconds
+with inertia (emu.Dynamics): the errors are then the distance between each
+method's trajectory and strict FEM's (both from rest, each on its own path).
 
 --hindsight adds EMU's bound: the fastest of its runs at alpha = 30-1000 mu
 (estimate off) to the first iterate from which it stays within the accuracy
@@ -66,12 +70,11 @@ def child(a) -> None:
     frames = frame_activations(act, a.frames) if a.frames else [act]
     out = {"scene": a.scene, "tets": len(scene.tets), "method": a.method, "threads": a.threads,
            "accuracy": a.accuracy, "frames": a.frames, "scene_rss_mb": scene_rss}
+    loads = [emu.Frame(activation=f, normalized=normalized) for f in frames]
+    dynamics = emu.Dynamics(a.dynamics) if a.dynamics else None
     if a.method == "reference":
         solver = emu.Solver(scene, "fem", rtol_grad=1e-9, lagged_factor=True)
-        sols, prev = [], None
-        for f in frames:
-            prev = solver.solve(f, normalized=normalized, initial=prev)
-            sols.append(prev.positions)
+        sols = [sol.positions for sol in emu.solve_frames(solver, loads, dynamics=dynamics)]
         np.save(a.positions, np.stack(sols))
         out["converged"] = all(True for _ in sols)
         print(json.dumps(out))
@@ -93,10 +96,11 @@ def child(a) -> None:
     options = dict(map(emu.options.parse_option, a.emu_option)) if a.method == "emu" else {}
     solver = emu.Solver(scene, **METHODS[a.method], accuracy=a.accuracy, **options)
     setup = time.perf_counter() - t0
-    frame_s, positions, prev, parts = [], [], None, []
-    for f in frames:
+    frame_s, positions, parts = [], [], []
+    steps = emu.solve_frames(solver, loads, dynamics=dynamics)
+    for _ in loads:
         t1 = time.perf_counter()
-        prev = solver.solve(f, normalized=normalized, initial=prev)
+        prev = next(steps)
         frame_s.append(time.perf_counter() - t1)
         positions.append(prev.positions)
         parts.append({"estimate_s": prev.error_estimate_time_s, "iterations": prev.iterations,
@@ -133,7 +137,7 @@ def cell(r: dict, key: str) -> str:
 def one_row(a, name: str, ref: dict, reference, ref_path: str, threads: int, accuracy: float, tmp: str) -> tuple:
     """(table cells, json row) of one scene at one thread count and accuracy: every method in
     its own process, errors to the reference, the faster FEM over EMU, the hindsight bound."""
-    common = ["--scene", name, "--frames", a.frames]
+    common = ["--scene", name, "--frames", a.frames, "--dynamics", a.dynamics]
     res = {}
     for m in METHODS:
         path = os.path.join(tmp, f"{name}_{m}.npy")
@@ -176,6 +180,8 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, nargs="*", default=[1])
     ap.add_argument("--accuracy", type=float, nargs="*", default=[0.01])
     ap.add_argument("--frames", type=int, default=0, help="sequences of this many frames (0: single solves)")
+    ap.add_argument("--dynamics", type=float, default=0.0,
+                    help="with --frames: each frame a BDF2 time step of this many seconds (0: equilibria)")
     ap.add_argument("--hindsight", action="store_true", help="EMU's hindsight bound (single solves)")
     ap.add_argument("--emu-option", action="append", default=[], metavar="NAME=VALUE",
                     help="an option for EMU's runs (e.g. joint_coordinates=False), as `emu run -O` takes it")
@@ -196,6 +202,8 @@ def main(argv=None):
     info = emu.info()
     kind = (f"sequences of {a.frames} frames, seconds per frame once warm (frames 2..{a.frames})" if a.frames
             else "single solves from rest, seconds, setup included")
+    if a.dynamics:
+        kind += f"; BDF2 time steps of {a.dynamics:g} s (errors: trajectory to strict FEM's)"
     print(f"emu {info['version']}; BLAS {info['config']}; {time.strftime('%Y-%m-%d')}; {kind}; "
           "(largest vertex error to strict FEM / diagonal)\n")
     head = "| scene | tets | threads | accuracy | FEM | lagged FEM | EMU (attempts, estimate s) | faster FEM / EMU |"
@@ -207,7 +215,7 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         for name in a.scenes:
             ref_path = os.path.join(tmp, f"{name}_ref.npy")
-            common = ["--scene", name, "--frames", a.frames]
+            common = ["--scene", name, "--frames", a.frames, "--dynamics", a.dynamics]
             ref = run_child([*common, "--method", "reference", "--positions", ref_path])
             if "failed" in ref:
                 print(f"| {name} | reference failed: {ref['failed']} |", flush=True)

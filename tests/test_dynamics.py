@@ -130,8 +130,6 @@ def test_bad_dynamics_input_is_named():
         emu.Dynamics(0.01, "rk4")
     with pytest.raises(ValueError, match="mass_damping must be >= 0"):
         emu.Dynamics(0.01, mass_damping=-1.0)
-    with pytest.raises(ValueError, match="not in EMU's solver yet: use method='fem'"):
-        next(emu.solve_frames(emu.Solver(scene, "emu"), [{}], dynamics=emu.Dynamics(0.01)))
     fem = emu.Solver(scene, "fem")
     with pytest.raises(ValueError, match=r"predicted positions must be a finite \(81, 3\) array"):
         fem.solve({}, inertia=(1.0, np.zeros((3, 3))))
@@ -182,9 +180,9 @@ def test_a_scene_file_runs_time_steps_and_writes_velocities(tmp_path):
         assert np.allclose(v, (x[k] - x[k - 1]) / 0.1, atol=1e-9 * np.abs(v).max())   # backward Euler's
         assert log["frames"][k - 1]["max_speed"] == pytest.approx(np.linalg.norm(v, axis=1).max())
     assert json.loads((tmp_path / "out" / "log.json").read_text())["frames"][-1]["max_speed"] > 0
-    path.write_text(SCENE_FILE.format(method="emu"))
-    with pytest.raises(emu.SceneFileError, match=r"\[dynamics\] needs \[solver\] method = \"fem\""):
-        emu.load_scene_file(path)
+    path.write_text(SCENE_FILE.format(method="emu"))   # EMU's steps too
+    log = emu.run_scene(emu.load_scene_file(path), str(tmp_path / "emu"), progress=lambda *_: None)
+    assert all(f["converged"] for f in log["frames"]) and log["frames"][-1]["max_speed"] > 0
     path.write_text(SCENE_FILE.format(method="fem").replace('"backward_euler"', '"leapfrog"'))
     with pytest.raises(emu.SceneFileError, match="integrator must be one of"):
         emu.load_scene_file(path)
@@ -214,3 +212,57 @@ def test_a_forearm_swings_under_gravity_and_energy_never_rises():
         ranges[integrator] = np.ptp(angles[-25:]) / np.ptp(angles[:25])
     assert ranges["bdf2"] > 0.8   # (docs: 0.96 at this step)
     assert ranges["backward_euler"] < 0.3 * ranges["bdf2"]
+
+
+def test_emu_inertia_through_the_fit_matches_finite_differences():
+    # EMU's positions are the fit x*(F): the inertia (w / 2) |x*(F) - y|^2_M
+    # has gradient J^T w M (x - y) and Hessian J^T w M J (fit_jacobian.h), with
+    # a movable forearm's unknown too
+    scene = emu.scenes.arm(1)
+    solver = emu.Solver(scene, "emu", alpha=100, error_estimate=False)
+    core = solver._core
+    load = solver.load_case({"flexor": 0.5}, normalized=True)
+    nu = core.num_unknowns
+    rng = np.random.default_rng(5)
+    F = np.tile(np.eye(3).ravel(), (nu, 1)) + 0.02 * rng.standard_normal((nu, 9))
+    plain = testing.hessian_product(core, load, F, F - np.eye(3).ravel(), True)
+    m = lumped_masses(scene)
+    load.inertia_weight = 0.1 * np.abs(plain).max() / m.max()
+    load.inertia_target = scene.points + 0.01 * rng.standard_normal(scene.points.shape)
+    products = {}
+    for only_bone in (False, True):
+        D = rng.standard_normal((nu, 9))
+        if only_bone:
+            D[:-1] = 0.0   # the forearm is the last unknown
+        h = 1e-6
+        g = testing.gradient(core, load, F)
+        fd = (testing.energy(core, load, F + h * D) - testing.energy(core, load, F - h * D)) / (2 * h)
+        assert abs(fd - np.sum(g * D)) <= 1e-6 * abs(fd) + 1e-9
+        Hd = testing.hessian_product(core, load, F, D, True)
+        fdH = (testing.gradient(core, load, F + h * D) - testing.gradient(core, load, F - h * D)) / (2 * h)
+        assert np.abs(fdH - Hd).max() <= 1e-5 * np.abs(fdH).max()
+        products[only_bone] = D, fdH
+    # the inertia is a real share of the product (the soft rows of a soft direction)
+    D, fdH = products[False]
+    load.inertia_weight = 0.0
+    H0 = testing.hessian_product(core, load, F, D, True)
+    assert np.abs(fdH - H0)[:-1].max() > 1e-2 * np.abs(fdH[:-1]).max()
+
+
+def test_emu_time_steps_match_fem_steps_from_the_same_state():
+    # each EMU step (accuracy mode) against FEM's strict step from the same
+    # state (positions, velocities): within the accuracy, its estimate certified
+    scene = emu.scenes.fusiform(2, warn=False)
+    dyn = emu.Dynamics(0.5)
+    fem = emu.Solver(scene, "fem", rtol_grad=1e-10)
+    solver = emu.Solver(scene, "emu", accuracy=0.01)
+    state, prev = emu.MotionState.at_rest(scene.points), None
+    for act in [{"belly": 5e4}] * 6 + [{}] * 6:
+        inertia = dyn.inertia(state)
+        prev = solver.solve(act, initial=prev, inertia=inertia)
+        ref = fem.solve(act, initial=state.positions, inertia=inertia)
+        assert prev.converged and ref.converged
+        assert emu.vertex_error(prev.positions, ref.positions) < 0.01
+        assert prev.error_estimate is not None and prev.error_estimate < 0.01
+        state = dyn.advance(state, prev.positions)
+    assert np.abs(state.velocities).max() > 0

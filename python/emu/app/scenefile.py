@@ -61,11 +61,11 @@
     count = 30
     dt = 0.0333                  # seconds per frame: frame k is at time k * dt
 
-    [dynamics]                   # time steps with inertia instead of equilibria (FEM for now:
-    integrator = "bdf2"          # [solver] method = "fem"): each frame one step of frames.dt from the
-    mass_damping = 0.0           # frame before (frame 0: from rest), masses from the materials'
-                                 # densities; "bdf2" (second order) or "backward_euler" (damps
-                                 # vibrations numerically); mass_damping: Rayleigh's c, 1/s
+    [dynamics]                   # time steps with inertia instead of equilibria: each frame one
+    integrator = "bdf2"          # step of frames.dt from the frame before (frame 0: from rest),
+    mass_damping = 0.0           # masses from the materials' densities; "bdf2" (second order) or
+                                 # "backward_euler" (damps vibrations numerically); mass_damping:
+                                 # Rayleigh's c, 1/s
 
     [activation.belly]           # one table per muscle; muscles not listed stay at 0
     keys = [[0.0, 0.0], [0.5, 1.0], [1.0, 0.0]]   # [time, value]; or per_frame = [...]
@@ -289,16 +289,13 @@ def load_scene_file(path) -> SceneSpec:
             "mesh.dataset), script a bone ([bones.<name>] axis, centre, angle) or set gravity")
     return SceneSpec(scene=scene, solver=solver, frames=count, dt=dt, curves=curves, bones=bones,
                      output=_output_table(data.get("output", {})), source=path, mesh_path=mpath,
-                     dynamics=_dynamics_table(data, solver, dt))
+                     dynamics=_dynamics_table(data, dt))
 
 
-def _dynamics_table(data: dict, solver: dict, dt: float):
+def _dynamics_table(data: dict, dt: float):
     """[dynamics] as an emu.Dynamics stepping frames.dt, or None."""
     if "dynamics" not in data:
         return None
-    if solver.get("method", "emu") != "fem":
-        raise SceneFileError("[dynamics] needs [solver] method = \"fem\": time steps with inertia are not in "
-                             "EMU's solver yet")
     table = data["dynamics"]
     try:
         return Dynamics(dt, table.get("integrator", "bdf2"), float(table.get("mass_damping", 0.0)))

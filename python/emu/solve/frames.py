@@ -5,6 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Iterable, Iterator
 
+import numpy as np
+
+from ..core.geometry import deformation_gradients
+
 __all__ = ["Frame", "solve_frames"]
 
 
@@ -32,7 +36,7 @@ def solve_frames(solver, frames: Iterable, initial=None, dynamics=None, state=No
     EMU's accuracy mode carries its alpha from frame to frame in the solver.
 
     dynamics  an emu.Dynamics: each frame is a time step of dynamics.dt seconds
-              with inertia (FEM only for now), from ``state`` (an emu.MotionState;
+              with inertia, from ``state`` (an emu.MotionState;
               None: at rest, or at ``initial``'s positions, with zero velocities);
               each Solution carries the ``velocities`` at its end. None:
               quasi-static equilibria."""
@@ -43,7 +47,7 @@ def solve_frames(solver, frames: Iterable, initial=None, dynamics=None, state=No
     for frame in frames:
         f = frame if isinstance(frame, Frame) else Frame(activation=frame)
         inertia = None if dynamics is None else dynamics.inertia(state)
-        start = prev if dynamics is None or prev is not None else state.positions
+        start = prev if dynamics is None or prev is not None else _start_of(solver, state.positions)
         prev = solver.solve(f.activation, normalized=f.normalized, gravity=f.gravity,
                             pin_positions=f.pin_positions, bone_poses=f.bone_poses or None, initial=start,
                             inertia=inertia)
@@ -51,3 +55,14 @@ def solve_frames(solver, frames: Iterable, initial=None, dynamics=None, state=No
             state = dynamics.advance(state, prev.positions)
             prev.velocities = state.velocities
         yield prev
+
+
+def _start_of(solver, positions):
+    """A time stepping's first start from positions (n, 3): FEM takes them, EMU
+    their per-tet deformation gradients (None at the rest shape: EMU's own start)."""
+    if solver.method == "fem":
+        return positions
+    scene = solver.scene
+    if np.array_equal(positions, scene.points):
+        return None
+    return deformation_gradients(scene.points, scene.tets, positions)

@@ -93,12 +93,9 @@ def load_case(scene, activation=None, normalized=False, gravity=None, pin_positi
     return load
 
 
-def set_inertia(load, scene, method: str, inertia) -> None:
+def set_inertia(load, scene, inertia) -> None:
     """load's inertia from (w, y): a time step's weight 1 / h_eff^2 and (n, 3)
     predicted positions (emu.solve.dynamics)."""
-    if method != "fem":
-        raise ValueError("dynamics (a time step's inertia) is not in EMU's solver yet: use method='fem' for time "
-                         "steps (quasi-static solves take either method)")
     try:
         w, y = inertia
         w = float(w)

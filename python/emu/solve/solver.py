@@ -158,11 +158,11 @@ class Solver:
                       FEM-corrected answer last, at the solve's time plus its estimates')
         inertia       a time step's inertia (w, y): the weight 1 / h_eff^2 and the (n, 3)
                       predicted positions of an implicit integrator (emu.solve.dynamics;
-                      solve_frames(..., dynamics=emu.Dynamics(dt)) sets them); FEM only
+                      solve_frames(..., dynamics=emu.Dynamics(dt)) sets them)
         """
         load = self.load_case(activation, normalized, gravity, pin_positions, bone_poses)
         if inertia is not None:
-            set_inertia(load, self.scene, self.method, inertia)
+            set_inertia(load, self.scene, inertia)
         if on_iteration is not None and not callable(on_iteration):
             raise TypeError(f"on_iteration must be callable, got {type(on_iteration).__name__}")
         iterates = [] if record_iterates else None

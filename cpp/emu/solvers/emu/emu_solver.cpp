@@ -9,6 +9,7 @@
 
 #include "emu/energy/acap_coupling.h"
 #include "emu/energy/gravity_work.h"
+#include "emu/energy/inertia.h"
 #include "emu/energy/joint_spring.h"
 #include "emu/linalg/rotation.h"
 #include "emu/model/tet_order.h"
@@ -149,9 +150,6 @@ void EmuSolver::set_cg_forcing_max(double eta_max) {
 
 EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   validate_load(model_, load);
-  if (load.inertia_weight > 0)
-    throw std::invalid_argument("dynamics (a time step's inertia) is not in EMU's solver yet: use method='fem' "
-                                "for time steps, or a quasi-static solve with EMU");
   Context c;
   c.act = tet_activation(model_, load);
   c.x_pinned = pinned_positions(model_, load);
@@ -165,6 +163,19 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   c.h = acap_->joint_targets(pinned_positions(model_, load), load.joint_targets);
   c.gravity = load.gravity;
   c.has_gravity = load.gravity.squaredNorm() > 0;
+  if (load.inertia_weight > 0) {
+    // on the vertices that move with F (free, or on a movable bone), as gravity
+    c.inertia_weight = load.inertia_weight;
+    c.inertia_target = load.inertia_target;
+    std::vector<Eigen::Triplet<double>> diag;
+    for (Eigen::Index v = 0; v < model_.rest.rows(); ++v)
+      if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0)
+        for (int k = 0; k < 3; ++k)
+          diag.emplace_back(3 * v + k, 3 * v + k, inertia::vertex_hessian(layout_.lumped_mass(v), c.inertia_weight));
+    const Eigen::Index n3 = 3 * model_.rest.rows();
+    c.inertia_hessian.resize(n3, n3);
+    c.inertia_hessian.setFromTriplets(diag.begin(), diag.end());
+  }
   if (c.has_gravity) {
     // d W(x*(F)) / dF = C^T K_c^-1 S^T f: one constant solve per load.
     jacobian_->force_fit(f, c.F_gravity);
@@ -210,7 +221,7 @@ void EmuSolver::riemannian_bone_columns(const Mat9X& F, const Mat9X& g, const Ma
 }
 
 double EmuSolver::total_energy(const Context& c, const Mat9X& F, const Mat9X& Fx, const Eigen::MatrixX3d& x) const {
-  return energy_along(c, F, Fx, nullptr, nullptr, 0.0) - load_work(c, x) + contact_energy(x);
+  return energy_along(c, F, Fx, nullptr, nullptr, 0.0) - load_work(c, x) + position_energy(c, x);
 }
 
 double EmuSolver::energy_along(const Context& c, const Mat9X& F, const Mat9X& Fx, const Mat9X* D,
@@ -341,9 +352,33 @@ Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
   return rows.transpose();
 }
 
-void EmuSolver::add_contact_gradient(const Eigen::MatrixX3d& x, Mat9X& g) const {
-  if (!has_contact()) return;
-  const Eigen::MatrixX3d gx = contact_.checked_gradient(x);
+double EmuSolver::position_energy(const Context& c, const Eigen::MatrixX3d& x) const {
+  double E = contact_energy(x);
+  if (c.inertia_weight > 0) {
+    // the vertices that move with F only (the others' share is a constant)
+    for (Eigen::Index v = 0; v < x.rows(); ++v)
+      if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0)
+        E += 0.5 * c.inertia_weight * layout_.lumped_mass(v) * (x.row(v) - c.inertia_target.row(v)).squaredNorm();
+  }
+  return E;
+}
+
+Eigen::SparseMatrix<double> EmuSolver::position_hessian(const Context& c, const Eigen::MatrixX3d& x) const {
+  if (!has_contact()) return c.inertia_hessian;
+  Eigen::SparseMatrix<double> H = contact_.checked_hessian(x);
+  if (c.inertia_weight > 0) H += c.inertia_hessian;
+  return H;
+}
+
+void EmuSolver::add_position_gradient(const Context& c, const Eigen::MatrixX3d& x, Mat9X& g) const {
+  if (!has_position_terms(c)) return;
+  Eigen::MatrixX3d gx = has_contact() ? contact_.checked_gradient(x) : Eigen::MatrixX3d::Zero(x.rows(), 3);
+  if (c.inertia_weight > 0)
+    for (Eigen::Index v = 0; v < x.rows(); ++v)
+      if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0)
+        gx.row(v) += inertia::vertex_gradient(layout_.lumped_mass(v), x.row(v).transpose(),
+                                              c.inertia_target.row(v).transpose(), c.inertia_weight)
+                         .transpose();
   if (gx.isZero(0.0)) return;
   Mat9X gF;
   jacobian_->transpose_apply(gx, gF);
@@ -465,7 +500,7 @@ class EmuSolver::NewtonProblem {
     if (!bones_) {
       // total_energy along the straight line F + s d: its fit and the load's work are linear in s
       const double E = s_.energy_along(c_, F_, Fx_, &d_, &Fd_, s) - Wx_ - s * Wdx_;
-      return s_.has_contact() ? E + s_.contact_energy(x_ + s * dx_) : E;
+      return s_.has_position_terms(c_) ? E + s_.position_energy(c_, x_ + s * dx_) : E;
     }
     s_.retract(F_, d_, s, Ftrial_);
     s_.fit_into(c_, Ftrial_, xtrial_, Fxtrial_);
@@ -479,12 +514,12 @@ class EmuSolver::NewtonProblem {
     Mat9X g1;
     if (bones_) {  // the retracted trial point and its fit, from trial_energy
       s_.gradient_into(c_, Ftrial_, Fxtrial_, g1);
-      s_.add_contact_gradient(xtrial_, g1);
+      s_.add_position_gradient(c_, xtrial_, g1);
       s_.project_tangent(Ftrial_, g1);
     } else {
       const Mat9X F1 = F_ + trial_s_ * d_, Fx1 = Fx_ + trial_s_ * Fd_;
       s_.gradient_into(c_, F1, Fx1, g1);
-      if (s_.has_contact()) s_.add_contact_gradient(x_ + trial_s_ * dx_, g1);
+      if (s_.has_position_terms(c_)) s_.add_position_gradient(c_, x_ + trial_s_ * dx_, g1);
     }
     return g1.norm();
   }
@@ -588,7 +623,7 @@ class EmuSolver::NewtonProblem {
   // The gradient at F with its fit (x, Fx), contact included (Euclidean).
   void gradient_with_fit(const Mat9X& F, const Eigen::MatrixX3d& x, const Mat9X& Fx, Mat9X& g) const {
     s_.gradient_into(c_, F, Fx, g);
-    s_.add_contact_gradient(x, g);
+    s_.add_position_gradient(c_, x, g);
   }
   void riemannian_gradient_at(const Mat9X& F, Mat9X& g) const {
     Eigen::MatrixX3d x;

@@ -100,6 +100,9 @@ class EmuSolver {
     Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
     bool has_gravity = false;
     Mat9X F_gravity;             // F_t(L^-1 f): the load's share of the gradient
+    double inertia_weight = 0;   // a time step's inertia (LoadCase; 0: none)
+    Eigen::MatrixX3d inertia_target;
+    Eigen::SparseMatrix<double> inertia_hessian;  // its constant Hessian (3 #V square, diagonal)
   };
   class NewtonProblem;  // one solve's problem, as the Newton driver minimises it (emu_solver.cpp)
   class StepSolver;     // the linear algebra of its steps (step_solver.h)
@@ -151,11 +154,17 @@ class EmuSolver {
   /// Setup: joint coordinates where the movable bones' joints form a forest.
   void set_bone_coordinates();
   Mat9X to_cols(const Eigen::MatrixXd& rows) const;
-  // Contact on the fitted positions x = x*(F) (its chain rule: fit_jacobian.h).
+  // Terms of the fitted positions x = x*(F), through the fit's chain rule
+  // (fit_jacobian.h): contact, and a time step's inertia (energy/inertia.h).
   bool has_contact() const { return contact_.active(); }
   double contact_energy(const Eigen::MatrixX3d& x) const { return has_contact() ? contact_.energy(x) : 0.0; }
-  /// g += dE_c/dF at the fit x.
-  void add_contact_gradient(const Eigen::MatrixX3d& x, Mat9X& g) const;
+  bool has_position_terms(const Context& c) const { return has_contact() || c.inertia_weight > 0; }
+  /// Their energy at the fit x.
+  double position_energy(const Context& c, const Eigen::MatrixX3d& x) const;
+  /// g += their dE/dF at the fit x.
+  void add_position_gradient(const Context& c, const Eigen::MatrixX3d& x, Mat9X& g) const;
+  /// Their Hessian in positions at the fit x (3 #V square; contact's PSD one, the inertia's diagonal).
+  Eigen::SparseMatrix<double> position_hessian(const Context& c, const Eigen::MatrixX3d& x) const;
 
   Model model_;
   UnknownLayout layout_;

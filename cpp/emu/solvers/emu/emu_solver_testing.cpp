@@ -14,7 +14,7 @@ double EmuSolverTesting::energy(const EmuSolver& s, const LoadCase& load, const 
   Eigen::MatrixX3d x;
   Mat9X Fx;
   s.fit_into(c, F, x, Fx);
-  return s.energy_along(c, F, Fx, nullptr, nullptr, 0.0) - s.load_work(c, x) + s.contact_energy(x);
+  return s.energy_along(c, F, Fx, nullptr, nullptr, 0.0) - s.load_work(c, x) + s.position_energy(c, x);
 }
 
 Eigen::MatrixXd EmuSolverTesting::gradient(const EmuSolver& s, const LoadCase& load, const Eigen::MatrixXd& Frows) {
@@ -24,7 +24,7 @@ Eigen::MatrixXd EmuSolverTesting::gradient(const EmuSolver& s, const LoadCase& l
   Mat9X Fx, g;
   s.fit_into(c, F, x, Fx);
   s.gradient_into(c, F, Fx, g);
-  s.add_contact_gradient(x, g);
+  s.add_position_gradient(c, x, g);
   return g.transpose();
 }
 
@@ -46,11 +46,11 @@ Eigen::MatrixXd EmuSolverTesting::hessian_product(const EmuSolver& s, const Load
   s.blocks_into(c, F, &A, &A_exact);
   Mat9X out;
   s.hessian_product_into(exact ? A_exact : A, V, out);
-  if (s.has_contact()) {  // J^T H_c J v at the fit of F
+  if (s.has_position_terms(c)) {  // J^T H_x J v at the fit of F (contact, inertia)
     Eigen::MatrixX3d x;
     Mat9X Fx;
     s.fit_into(c, F, x, Fx);
-    s.jacobian_->add_hessian_product(s.contact_.checked_hessian(x), V, out);
+    s.jacobian_->add_hessian_product(s.position_hessian(c, x), V, out);
   }
   return out.transpose();
 }

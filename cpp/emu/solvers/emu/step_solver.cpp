@@ -34,9 +34,9 @@ bool EmuSolver::StepSolver::direction(int it, bool exact, const Eigen::MatrixX3d
   bool refreshed = false;
   if (!refresh_blocks(it, exact, dir, time, refreshed)) return false;
   const std::vector<Mat9>& H = exact ? A_exact_ : A_;
-  if (s_.has_contact()) {
+  if (s_.has_position_terms(c_)) {
     ScopedSeconds timer(time.hessian);
-    Hc_ = s_.contact_.checked_hessian(x);
+    Hc_ = s_.position_hessian(c_, x);
   }
   const auto product = [&](const Mat9X& v, Mat9X& out) { hessian_product(H, exact, v, out); };
   for (Mat9X& r : recycled_) s_.project_tangent(F_, r);  // tangent at the current bones
@@ -98,7 +98,7 @@ bool EmuSolver::StepSolver::refresh_blocks(int it, bool exact, SearchDirection& 
 void EmuSolver::StepSolver::hessian_product(const std::vector<Mat9>& H, bool exact, const Mat9X& v, Mat9X& out) const {
   if (bones_) s_.riemannian_product(H, F_, g_, v, exact, out);
   else s_.hessian_product_into(H, v, out);
-  if (s_.has_contact() && Hc_.nonZeros()) {
+  if (s_.has_position_terms(c_) && Hc_.nonZeros()) {
     Mat9X add = Mat9X::Zero(9, out.cols());
     s_.jacobian_->add_hessian_product(Hc_, v, add);
     if (bones_) s_.project_tangent(F_, add);
@@ -112,7 +112,7 @@ void EmuSolver::StepSolver::build_coarse_space(const std::vector<Mat9>& H, bool 
   const auto turn = [&](int b, const std::array<Mat3, 3>& M, std::array<Mat9X, 3>& Z, std::array<Mat9X, 3>& HZ) {
     s_.turn_fits_->turns<3>(H, b, M, s_.emu_.alpha, s_.acap_->weight_volume(), Z, HZ);
     for (int k = 0; k < 3; ++k) {
-      if (s_.has_contact() && Hc_.nonZeros()) product(Z[k], HZ[k]);  // contact needs the fitted positions
+      if (s_.has_position_terms(c_) && Hc_.nonZeros()) product(Z[k], HZ[k]);  // position terms need the fit
       else
         s_.riemannian_bone_columns(F_, g_, Z[k], exact, HZ[k]);
     }

@@ -58,7 +58,7 @@ class EmuSolver::StepSolver {
   const double &gn_, &g0_;
   Mat9X& d_;
   std::vector<Mat9> A_, A_exact_;
-  Eigen::SparseMatrix<double> Hc_;  // contact Hessian at the iterate (3 #V square)
+  Eigen::SparseMatrix<double> Hc_;  // the position terms' Hessian at the iterate (3 #V square)
   int since_refresh_ = 0, cg_after_refresh_ = -1, last_cg_ = 0;
   BoneCoarseSpace coarse_;
   std::vector<Mat9X> recycled_;
