@@ -137,6 +137,20 @@ def test_bad_dynamics_input_is_named():
         fem.solve({}, inertia=(-1.0, scene.points))
     with pytest.raises(ValueError, match="velocities must be a finite array"):
         emu.MotionState.at_rest(scene.points, np.zeros((2, 3)))
+    x = scene.points
+    with pytest.raises(ValueError, match="both previous_positions and previous_velocities"):
+        emu.MotionState(x, 0 * x, previous_positions=x)
+    with pytest.raises(ValueError, match="needs dynamics=emu.Dynamics"):
+        next(emu.solve_frames(fem, [{}], state=emu.MotionState.at_rest(x)))
+    with pytest.raises(TypeError, match="initial must be a Solution"):
+        next(emu.solve_frames(fem, [{}], initial=x, dynamics=emu.Dynamics(0.01)))
+    with pytest.raises(ValueError, match="dt must be a positive"):
+        emu.Dynamics(True)
+    assert emu.Dynamics(np.float32(0.5)).dt == np.float32(0.5)
+    # a run of time steps with EMU names FEM (measured slower per step), none with FEM
+    from emu.solve.advice import method_hint
+    assert "method='fem'" in method_hint(scene, "emu", sequence=True, dynamics=True)
+    assert method_hint(scene, "fem", sequence=True, dynamics=True) is None
 
 
 SCENE_FILE = """

@@ -11,9 +11,10 @@
 
 namespace emu::inertia {
 
-/// mass  #V lumped masses;  x, y  #V by 3 positions and predicted positions;  w  1 / h_eff^2.
-inline double energy(const Eigen::VectorXd& mass, const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& y, double w) {
-  return 0.5 * w * (mass.array() * (x - y).rowwise().squaredNorm().array()).sum();
+/// (w / 2) m |x - y|^2: a vertex of mass m at x with predicted position y; w = 1 / h_eff^2.
+/// The solvers sum it over the vertices that move (free, or on a movable bone).
+inline double vertex_energy(double m, const Eigen::Vector3d& x, const Eigen::Vector3d& y, double w) {
+  return 0.5 * w * m * (x - y).squaredNorm();
 }
 
 /// dI/dx_v for a vertex of mass m at x with predicted position y.

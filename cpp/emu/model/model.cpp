@@ -144,7 +144,7 @@ void validate_load(const Model& model, const LoadCase& load) {
   check_finite(load.joint_targets, "joint targets");
   check_finite(load.gravity, "gravity");
   if (!std::isfinite(load.inertia_weight) || load.inertia_weight < 0)
-    fail("inertia_weight must be finite and >= 0 (1 / h^2 of a time step; 0: quasi-static)");
+    fail("inertia_weight must be finite and >= 0 (1 / h_eff^2 of a time step; 0: quasi-static)");
   if (load.inertia_weight > 0 && load.inertia_target.rows() != model.rest.rows()) {
     std::ostringstream s;
     s << "inertia_target has " << load.inertia_target.rows() << " rows, expected one per vertex, "

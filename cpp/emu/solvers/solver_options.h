@@ -65,7 +65,8 @@ struct SolverOptions {
   // than about half a factorisation costs (FemSolver::refresh_iterations)
   // marks the factor as aged, and the next step or correction factorises
   // afresh instead of running PCG on it (in a sequence an old factor's PCG
-  // grows frame by frame). false: only a failed PCG factorises.
+  // grows frame by frame). false: only a failed PCG factorises (the core's
+  // default; emu.Solver's option lagged_refresh, and the error estimator, turn it on).
   bool lagged_refresh = false;
   // Polled once per iteration; returning true stops the solve with status
   // "interrupted" (the Python bindings use it for Ctrl-C).

@@ -79,7 +79,8 @@ def run_scene(spec: SceneSpec, out_dir: str | None = None, progress=print, on_fr
            "frames": [], "interrupted": False}
     t_start = time.perf_counter()
     progress(f"{spec.scene}; {spec.frames} frame(s), {solver.method} (setup {solver.setup_time_s:.2f} s)")
-    log["method_hint"] = hint = method_hint(spec.scene, solver.method, sequence=spec.frames > 1)
+    log["method_hint"] = hint = method_hint(spec.scene, solver.method, sequence=spec.frames > 1,
+                                               dynamics=spec.dynamics is not None)
     if hint:
         progress(hint)
     try:

@@ -36,9 +36,15 @@ def faster_method(scene, sequence: bool = False) -> str:
     return "emu" if limit is not None and soft_tets(scene) >= limit else "fem"
 
 
-def method_hint(scene, method: str, sequence: bool = False) -> str | None:
+def method_hint(scene, method: str, sequence: bool = False, dynamics: bool = False) -> str | None:
     """A one-line hint where ``method`` is on the slower side of the measured
-    crossover for this scene's size and kind, naming the faster one; None otherwise."""
+    crossover for this scene's size and kind, naming the faster one; None otherwise.
+    dynamics: the frames are time steps with inertia, where EMU was slower than FEM
+    at every size measured (docs/DESIGN.md, "Dynamics")."""
+    if dynamics:
+        return None if method == "fem" else (
+            "hint: EMU's time steps were slower than FEM's at every size measured (its preconditioner "
+            "leaves the inertia out; 0.28x on the 17k-tet muscle): method='fem', or with lagged_factor=True")
     faster = faster_method(scene, sequence)
     if faster == method:
         return None

@@ -22,6 +22,7 @@ lumped masses. docs/DESIGN.md, "Dynamics".
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,19 +46,18 @@ class Dynamics:
     mass_damping: float = 0.0
 
     def __post_init__(self):
-        if not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and self.dt > 0):
+        if not (_real(self.dt) and self.dt > 0):
             raise ValueError(f"dynamics dt must be a positive number of seconds, got {self.dt!r}")
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"dynamics integrator must be one of {', '.join(INTEGRATORS)}, got "
                              f"{self.integrator!r}")
-        if not (isinstance(self.mass_damping, (int, float)) and math.isfinite(self.mass_damping)
-                and self.mass_damping >= 0):
+        if not (_real(self.mass_damping) and self.mass_damping >= 0):
             raise ValueError(f"dynamics mass_damping must be >= 0 (1/s), got {self.mass_damping!r}")
 
     def inertia(self, state: "MotionState") -> tuple:
         """(w, y): the next step's inertia weight and predicted positions (#V, 3) from state."""
         h, x, v = float(self.dt), state.positions, state.velocities
-        if self.integrator == "bdf2" and state.previous_positions is not None:
+        if self._bdf2(state):
             xp, vp = state.previous_positions, state.previous_velocities
             y = (4.0 * x - xp) / 3.0 + (2.0 * h / 9.0) * (4.0 * v - vp)
             w, z, k = 1.0 / (2.0 * h / 3.0) ** 2, (4.0 * x - xp) / 3.0, 1.5 / h
@@ -73,11 +73,20 @@ class Dynamics:
         """The state after a step that ended at positions (#V, 3)."""
         x = np.array(positions, dtype=np.float64)
         h = float(self.dt)
-        if self.integrator == "bdf2" and state.previous_positions is not None:
+        if self._bdf2(state):
             v = (3.0 * x - 4.0 * state.positions + state.previous_positions) / (2.0 * h)
         else:
             v = (x - state.positions) / h
         return MotionState(x, v, state.positions, state.velocities, state.steps + 1)
+
+    def _bdf2(self, state: "MotionState") -> bool:
+        """Whether this step is BDF2's (its first step is backward Euler's: no step before)."""
+        return self.integrator == "bdf2" and state.previous_positions is not None
+
+
+def _real(value) -> bool:
+    """A finite real number (not a bool)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
 
 
 @dataclass
@@ -89,6 +98,20 @@ class MotionState:
     previous_positions: np.ndarray | None = None
     previous_velocities: np.ndarray | None = None
     steps: int = 0
+
+    def __post_init__(self):
+        shape = np.shape(self.positions)
+        if len(shape) != 2 or shape[1] != 3:
+            raise ValueError(f"MotionState positions must be a (#V, 3) array, got shape {shape}")
+        if np.shape(self.velocities) != shape:
+            raise ValueError(f"MotionState velocities must have the positions' shape {shape}, got "
+                             f"{np.shape(self.velocities)}")
+        if (self.previous_positions is None) != (self.previous_velocities is None):
+            raise ValueError("MotionState needs both previous_positions and previous_velocities (the step "
+                             "before, for BDF2) or neither")
+        for name in ("previous_positions", "previous_velocities"):
+            if getattr(self, name) is not None and np.shape(getattr(self, name)) != shape:
+                raise ValueError(f"MotionState {name} must have the positions' shape {shape}")
 
     @classmethod
     def at_rest(cls, positions, velocities=None) -> "MotionState":

@@ -41,8 +41,13 @@ def solve_frames(solver, frames: Iterable, initial=None, dynamics=None, state=No
               each Solution carries the ``velocities`` at its end. None:
               quasi-static equilibria."""
     prev = initial
+    if dynamics is None and state is not None:
+        raise ValueError("solve_frames: a MotionState (state=) needs dynamics=emu.Dynamics(dt)")
     if dynamics is not None and state is None:
         from .dynamics import MotionState
+        if initial is not None and not hasattr(initial, "positions"):
+            raise TypeError("solve_frames with dynamics: initial must be a Solution of this solver (or give "
+                            "state=emu.MotionState.at_rest(positions, velocities))")
         state = MotionState.at_rest(solver.scene.points if initial is None else initial.positions)
     for frame in frames:
         f = frame if isinstance(frame, Frame) else Frame(activation=frame)
@@ -53,7 +58,7 @@ def solve_frames(solver, frames: Iterable, initial=None, dynamics=None, state=No
                             inertia=inertia)
         if dynamics is not None:
             state = dynamics.advance(state, prev.positions)
-            prev.velocities = state.velocities
+            prev.velocities = state.velocities.copy()
         yield prev
 
 

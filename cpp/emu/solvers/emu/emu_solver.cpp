@@ -358,7 +358,8 @@ double EmuSolver::position_energy(const Context& c, const Eigen::MatrixX3d& x) c
     // the vertices that move with F only (the others' share is a constant)
     for (Eigen::Index v = 0; v < x.rows(); ++v)
       if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0)
-        E += 0.5 * c.inertia_weight * layout_.lumped_mass(v) * (x.row(v) - c.inertia_target.row(v)).squaredNorm();
+        E += inertia::vertex_energy(layout_.lumped_mass(v), x.row(v).transpose(), c.inertia_target.row(v).transpose(),
+                                    c.inertia_weight);
   }
   return E;
 }

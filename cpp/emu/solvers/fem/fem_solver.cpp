@@ -81,7 +81,11 @@ double FemSolver::energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& 
   double E = 0;
   for (Eigen::Index t = 0; t < m; ++t) E += tet_energy_[t];  // fixed order: reproducible
   if (grav.squaredNorm() > 0) E -= gravity_work::energy(layout_.lumped_mass, x, grav);
-  if (load.inertia_weight > 0) E += inertia::energy(layout_.lumped_mass, x, load.inertia_target, load.inertia_weight);
+  if (load.inertia_weight > 0)  // on the vertices that move (the rest's share is a constant), as EMU's
+    for (Eigen::Index v = 0; v < x.rows(); ++v)
+      if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0)
+        E += inertia::vertex_energy(layout_.lumped_mass(v), x.row(v).transpose(), load.inertia_target.row(v).transpose(),
+                                    load.inertia_weight);
   return E;
 }
 
@@ -210,7 +214,10 @@ double FemSolver::gradient_floor(const Eigen::VectorXd& act) const {
   double force_scale = 0;
   for (Eigen::Index t = 0; t < model_.tets.rows(); ++t)
     if (!layout_.is_bone_tet(t)) force_scale += layout_.geometry.volume(t) * (model_.mu(t) + model_.lambda(t) + act(t));
-  force_scale /= bbox_diagonal(model_.rest);
+  const double diagonal = bbox_diagonal(model_.rest);
+  force_scale /= diagonal;
+  // a time step's inertia w m (x - y): its round-off scales with w m times the positions' size
+  if (inertia_weight_ > 0) force_scale += inertia_weight_ * layout_.lumped_mass.sum() * diagonal;
   return 1e-13 * force_scale;
 }
 
@@ -533,7 +540,8 @@ SolveResult FemSolver::solve(const LoadCase& load, const Eigen::MatrixX3d* initi
   // without contact (its terms need not be defined at rest under these pins).
   double cold_g0 = 0.0;
   if (initial && options_.step_tol > 0 && options_.step_tol_cold_scale && !has_contact())
-    cold_g0 = NewtonProblem(*this, load, act, nullptr).grad_norm();
+    // (a time step's cold start: its predicted positions, where an integrator starts)
+    cold_g0 = NewtonProblem(*this, load, act, load.inertia_weight > 0 ? &load.inertia_target : nullptr).grad_norm();
   NewtonProblem newton(*this, load, act, initial);
   SolveResult res;
   newton_minimize(newton, options_, gradient_floor(act), t0, res, 0.0, cold_g0);
@@ -557,6 +565,7 @@ Eigen::MatrixX3d FemSolver::newton_correction(const LoadCase& load, const Eigen:
   if (max_steps < 1) throw std::invalid_argument("max_steps must be >= 1");
   const Eigen::VectorXd act = tet_activation(model_, load);
   Eigen::MatrixX3d x = x0;
+  set_inertia(load);  // (the floor reads it)
   const double floor = gradient_floor(act);
   // the exact Newton step alone compares no energies
   const bool newton_only = hessian == CorrectionHessian::LaggedNewton || hessian == CorrectionHessian::Newton;
