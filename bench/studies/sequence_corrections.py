@@ -20,11 +20,15 @@ import sys
 import time
 
 import emu
+from emu.core.geometry import vertex_error
 from emu.solve import estimate as estimate_module
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import SCENES, start_run  # noqa: E402
 from shipped import frame_activations  # noqa: E402
+
+
+LOG: list = []   # the estimator's FEM steps of the current frame
 
 
 def traced_estimator(log: list):
@@ -47,23 +51,25 @@ def traced_estimator(log: list):
 
 
 def emu_sequence(name: str, frames: list, normalized: bool, refresh: bool, per_frame: bool) -> None:
-    log: list = []
     estimate_module.ESTIMATE_REFRESH = refresh
     scene = SCENES[name]()[0]
     solver = emu.Solver(scene, method="emu", accuracy=0.01)
     prev, warm, estimate = None, 0.0, 0.0
     for k, act in enumerate(frames):
-        log.clear()
+        LOG.clear()
         t0 = time.perf_counter()
         prev = solver.solve(act, normalized=normalized, initial=prev)
         seconds = time.perf_counter() - t0
         if k:
             warm, estimate = warm + seconds, estimate + prev.error_estimate_time_s
         if per_frame:
-            steps = " ".join(f"{kind}:{pcg}/{fz}/{t:.3f}" for kind, pcg, fz, t in log)
+            steps = " ".join(f"{kind}:{pcg}/{fz}/{t:.3f}" for kind, pcg, fz, t in LOG)
+            chain = [prev.emu_positions] + list(prev.fem_steps or [])
+            lengths = " ".join(f"{vertex_error(a, b):.1e}" for a, b in zip(chain, chain[1:])
+                               if a is not None and b is not None)
             print(f"  {k:2d} {seconds:.3f} s, estimate {prev.error_estimate_time_s:.3f} s, Newton / CG "
                   f"{prev.iterations} / {prev.cg_iterations}, corrected {int(prev.corrected)}, "
-                  f"estimate {prev.error_estimate:.1e} | {steps}")
+                  f"estimate {prev.error_estimate:.1e} | {steps} | steps {lengths}")
     fem = solver._estimator.fem
     print(f"{name}: EMU warm frames {warm:.2f} s (estimate {estimate:.2f} s); the estimator's PCG "
           f"{fem.pcg_iterations}, factorisations {fem.factorizations}")
@@ -92,7 +98,7 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=1)
     a = ap.parse_args(argv)
     start_run(a.threads)
-    traced_estimator([])
+    traced_estimator(LOG)
     refresh = not a.no_refresh
     print(f"lagged_refresh {refresh}")
     for name in a.scenes:
