@@ -21,6 +21,7 @@ from emu._core import testing
 from emu import _core
 
 from conftest import gradient_operator, small_scene
+from emu.solve.load import set_inertia
 
 GRAVITY = np.array([0.0, -9.81, 0.0])
 
@@ -560,3 +561,50 @@ def test_single_precision_s0_is_the_old_name_of_single_precision_preconditioner(
     with pytest.raises(ValueError, match="give only single_precision_preconditioner"):
         emu.Solver(s, "emu", alpha=100.0, error_estimate=False, single_precision_s0=False,
                    single_precision_preconditioner=True)
+
+
+@pytest.mark.parametrize("ratio", [0.1, 10.0])
+def test_constant_schur_preconditioner_with_inertia(ratio):
+    """A time step's inertia (w / 2) |x(F) - y|^2_M adds J^T w M J (J = K^-1 C,
+    the fit's Jacobian) to the Hessian. The constant Schur preconditioner then
+    inverts A - alpha^2 C^T (alpha K + w M)^-1 C through S0 + (w / alpha) M on
+    the free vertices (built here in numpy): the same vectors, and the
+    preconditioned Hessian with the inertia far better conditioned than with
+    the preconditioner that leaves it out. w is set so that w M stands at
+    `ratio` x alpha K's mean diagonal."""
+    s, _ = small_scene(2)
+    solver = emu.Solver(s, "emu", alpha=100.0, preconditioner="constant-schur", single_precision_preconditioner=False)
+    core = solver._core
+    R = Reference(solver)
+    mf = R.mass[R.free]
+    assert mf.min() > 0
+    w = ratio * R.alpha * np.mean(np.diag(R.L)) / np.mean(mf)
+    load = solver.load_case({"belly": 5e4})
+    set_inertia(load, s, (w, R.rest))
+    F = perturbed(R.m, 0.1, 31)
+    A = R.blocks(load, F)
+    h = R.mu + R.lam / 3
+    e = R.wv * h / (h + R.alpha * R.wv / R.vol)
+    S0 = R.Gf.T @ (np.repeat(e, 9)[:, None] * R.Gf)
+    Mf = np.diag(np.repeat(mf, 3))
+    Ainv = sl.block_diag(*np.linalg.inv(A))
+
+    def preconditioner(S):
+        return Ainv + R.alpha * Ainv @ R.C.T @ sl.solve(S, R.C @ Ainv, assume_a="pos")
+    with_inertia, without = preconditioner(S0 + w / R.alpha * Mf), preconditioner(S0)
+    Rhs = np.random.default_rng(32).standard_normal((R.m, 9))
+    got = testing.constant_schur_solve(core, load, F, Rhs)
+    want = (with_inertia @ Rhs.ravel()).reshape(-1, 9)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-8 * np.abs(want).max())
+    J = sl.solve(R.K, R.C, assume_a="pos")
+    H = R.hessian(A) + w * J.T @ Mf @ J
+
+    def condition(Minv):
+        ev = np.linalg.eigvals(Minv @ H).real
+        assert ev.min() > 0
+        return ev.max() / ev.min()
+    kept, left_out = condition(with_inertia), condition(without)
+    assert kept < 0.5 * left_out
+    load.inertia_weight = 0.0   # back to the quasi-static preconditioner
+    np.testing.assert_allclose(testing.constant_schur_solve(core, load, F, Rhs),
+                               (without @ Rhs.ravel()).reshape(-1, 9), rtol=0, atol=1e-8 * np.abs(want).max())

@@ -60,7 +60,8 @@ Eigen::Vector4d phi_of(const Model& model, const UnknownLayout& layout, int v, i
 }  // namespace
 
 AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd* weight_volume,
-                           const AcapOperator* pattern_of, bool single_precision)
+                           const AcapOperator* pattern_of, bool single_precision,
+                           const Eigen::VectorXd* free_diagonal)
     : rounded_(single_precision), model_(model), layout_(layout),
       pattern_(pattern_of ? pattern_of->pattern_
                           : std::make_shared<const BlockPattern>(model.tets, layout.free_index, layout.num_free, 1)) {
@@ -80,6 +81,16 @@ AcapOperator::AcapOperator(const Model& model, const UnknownLayout& layout, cons
   }
   std::vector<double> values(pattern_->nnz());
   pattern_->assemble(element.data(), values.data());
+  if (free_diagonal) {
+    if (free_diagonal->size() != ns_) throw std::invalid_argument("AcapOperator: one diagonal value per free vertex expected");
+    // the upper triangle by columns: each column's diagonal entry is its last
+    const auto& cp = pattern_->col_ptr();
+    const auto& ri = pattern_->row_index();
+    for (int j = 0; j < ns_; ++j) {
+      if (ri[cp[j + 1] - 1] != j) throw std::logic_error("AcapOperator: a column's last entry is not its diagonal");
+      values[cp[j + 1] - 1] += (*free_diagonal)(j);
+    }
+  }
   // METIS where it pays (docs/DESIGN.md, "Orderings"): CHOLMOD's default
   // keeps AMD for the ACAP matrix of a compact 3D mesh at any size, while
   // METIS fills less on large meshes; below kAcapMetisRows its gain is too

@@ -57,8 +57,11 @@ class AcapOperator {
   /// single_precision  every solve with the factor rounded to float, the bone
   ///                elimination's included: the exact inverse of the rounded
   ///                matrix, for a preconditioner (ConstantSchur's own S0)
+  /// free_diagonal  #free values added to the scalar matrix's diagonal (nullptr:
+  ///                none; ConstantSchur's inertia)
   AcapOperator(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd* weight_volume = nullptr,
-               const AcapOperator* pattern_of = nullptr, bool single_precision = false);
+               const AcapOperator* pattern_of = nullptr, bool single_precision = false,
+               const Eigen::VectorXd* free_diagonal = nullptr);
 
   /// Number of scalar position unknowns per coordinate: num_free + 4 #bones.
   int dofs() const { return ns_ + nq_; }

@@ -29,6 +29,10 @@ class BlockPreconditioner {
   /// A new alpha for the following update() calls (the constant Schur
   /// preconditioner factorises its S0 again; the others only keep the value).
   virtual void set_alpha(double alpha) = 0;
+  /// A time step's inertia weight w (LoadCase::inertia_weight; 0: none) for the
+  /// following update() calls: the constant Schur preconditioner puts (w /
+  /// alpha) M on S0's diagonal and factorises it again; the others ignore it.
+  virtual void set_inertia(double /*weight*/) {}
   /// Whether update() factorises a sparse matrix (counted in the solve's factorizations).
   virtual bool factorises_on_update() const { return false; }
   /// What it holds, with bytes (EmuSolver::structures).

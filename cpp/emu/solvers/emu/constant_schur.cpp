@@ -4,6 +4,7 @@
 #include "emu/solvers/emu/schur_form.h"
 
 #include <cmath>
+#include <stdexcept>
 
 namespace emu {
 
@@ -34,19 +35,38 @@ ConstantSchur::ConstantSchur(const Model& model, const UnknownLayout& layout, Ac
 void ConstantSchur::set_alpha(double alpha) {
   if (alpha == alpha_) return;
   alpha_ = alpha;
+  build_s0();
+}
+
+void ConstantSchur::set_inertia(double weight) {
+  if (!(weight >= 0) || !std::isfinite(weight)) throw std::invalid_argument("the inertia weight must be >= 0 and finite");
+  if (weight == inertia_) return;
+  inertia_ = weight;
+  build_s0();
+}
+
+void ConstantSchur::build_s0() {
   const Eigen::VectorXd& wv = acap_.weight_volume();
-  const Eigen::VectorXd e = weights(model_, layout_, wv, alpha);
+  const Eigen::VectorXd e = weights(model_, layout_, wv, alpha_);
   // S0 = c K where every tet's e_t / (w_t V_t) is the same c (one tissue, or
-  // ACAP weights proportional to the curvatures): K's own factor serves.
+  // ACAP weights proportional to the curvatures) and no inertia: K's own factor serves.
   const Eigen::ArrayXd ratio = e.array() / wv.array();
-  if (ratio.maxCoeff() - ratio.minCoeff() <= 1e-12 * ratio.maxCoeff()) {
+  if (inertia_ == 0.0 && ratio.maxCoeff() - ratio.minCoeff() <= 1e-12 * ratio.maxCoeff()) {
     scale_ = ratio.maxCoeff();
     s0_.reset();
   } else {
     scale_ = 1.0;
+    // + (w / alpha) m_v on each free vertex (see the header)
+    Eigen::VectorXd diagonal;
+    if (inertia_ > 0) {
+      diagonal.setZero(layout_.num_free);
+      for (Eigen::Index v = 0; v < layout_.free_index.size(); ++v)
+        if (layout_.free_index(v) >= 0) diagonal(layout_.free_index(v)) = inertia_ / alpha_ * layout_.lumped_mass(v);
+    }
     // the ACAP matrix's pattern; rounded, every solve of it (the bone
     // elimination's too) is the exact inverse of the rounded matrix
-    s0_ = std::make_unique<AcapOperator>(model_, layout_, &e, &acap_, single_precision_);
+    s0_ = std::make_unique<AcapOperator>(model_, layout_, &e, &acap_, single_precision_,
+                                         inertia_ > 0 ? &diagonal : nullptr);
   }
   // S0 = c K shares the fit's operator, which must stay exact: a rounded copy
   // of its factor beside it (solve_rounded: operators without movable bones;

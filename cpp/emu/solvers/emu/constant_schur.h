@@ -22,6 +22,16 @@
 // AcapOperator with these weights on the ACAP matrix's symbolic analysis: a
 // ninth of FEM's factor entries), never per Newton step; a rebuild only
 // inverts the 9x9 blocks.
+// A time step's inertia (w / 2) |x(F) - y|^2_M on the fitted positions adds
+// J^T w M J (J = K^-1 C, the fit's Jacobian) to H = A - alpha C^T K^-1 C. The
+// preconditioner inverts instead the Hessian of F where the positions
+// minimise the ACAP coupling and the inertia together,
+//   H~ = A - alpha^2 C^T (alpha K + w M)^-1 C,  H~^-1 through S + (w / alpha) M,
+// equal to H to first order in w M (alpha K)^-1, which is small on a muscle at
+// animation time steps (alpha K's softest mode stands ~1e2 above w M at
+// 1/24 s): S0 takes (w / alpha) m_v on each free vertex's diagonal
+// (set_inertia), factorised once per alpha and step size. A movable bone's
+// inertia stays out of S0 (its turns are the coarse space's).
 // The preconditioned eigenvalues are 1 and those of S0^-1 S: how well one
 // scalar per tet stands for the material's curvatures (nearly incompressible
 // tissue: lambda ~ 25 mu), independent of the mesh size, where the Woodbury
@@ -56,6 +66,8 @@ class ConstantSchur final : public BlockPreconditioner {
 
   /// A new alpha: S0's weights change, so it is factorised again (numerically).
   void set_alpha(double alpha) override;
+  /// A time step's inertia weight w (0: none): S0 + (w / alpha) M, factorised again where w changed.
+  void set_inertia(double weight) override;
   void add_structures(std::vector<std::pair<std::string, double>>& out) const override {
     out.emplace_back("constant Schur preconditioner", bytes());
   }
@@ -78,7 +90,8 @@ class ConstantSchur final : public BlockPreconditioner {
   const AcapOperator& s0() const { return s0_ ? *s0_ : acap_; }
   AcapOperator& acap_;
   bool single_precision_, rounded_ = false;
-  double alpha_;
+  double alpha_, inertia_ = 0.0;
+  void build_s0();  // S0 at alpha_ and inertia_
   std::unique_ptr<AcapOperator> s0_;  // empty where S0 = scale_ K (K's factor serves)
   double scale_ = 1.0;
   std::vector<Mat9> Ainv_;          // the block inverses in double, or

@@ -656,6 +656,7 @@ class EmuSolver::NewtonProblem {
 SolveResult EmuSolver::solve(const LoadCase& load, const Eigen::MatrixXd* F0) {
   const auto t0 = Clock::now();
   const Context c = make_context(load);
+  preconditioner_->set_inertia(c.inertia_weight);  // (a new step size factorises S0 again)
   Mat9X start = start_unknowns(F0);
   if (joints_) joints_->project_onto_joints(start, c.h);
   NewtonProblem newton(*this, c, std::move(start));

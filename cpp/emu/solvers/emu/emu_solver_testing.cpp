@@ -133,6 +133,7 @@ Eigen::MatrixXd EmuSolverTesting::constant_schur_solve(EmuSolver& s, const LoadC
                                                        const Eigen::MatrixXd& Frows, const Eigen::MatrixXd& Rrows) {
   auto* pc = dynamic_cast<ConstantSchur*>(s.preconditioner_.get());
   if (!pc) throw std::invalid_argument("this solver has no constant Schur preconditioner (preconditioner='constant-schur')");
+  pc->set_inertia(load.inertia_weight);
   return preconditioner_solve(s, *pc, load, Frows, Rrows,
                               "a filtered Hessian block is not positive definite");
 }
