@@ -5,16 +5,20 @@ forearm swinging under gravity.
    from a small displacement along its first mode (linear regime), three
    periods: the period and the amplitude kept per period against the mesh's
    own generalised eigenproblem K v = w^2 M v (K: FEM's Newton matrix at rest,
-   M: the lumped masses), for steps per period from coarse to fine.
+   M: the lumped masses), for steps per period from coarse to fine; then from
+   a large displacement (nonlinear), where the period is the large motion's
+   and the energy's largest rise above its start is what a symplectic
+   integrator risks.
+   Implicit midpoint (measured here, not shipped: see midpoint_steps) beside
+   emu.Dynamics' backward Euler and BDF2.
 2. The swing: the built-in arm (emu.scenes.arm(1): forearm on a hinge, two
    passive muscles) released from its rest shape under gravity, one second:
    the energy (elastic, gravity's, kinetic with the lumped masses) lost as a
    fraction of what the swing has (start less the static equilibrium), the
    forearm's angle range in the last quarter second against the first, and
    whether the energy ever rose above its start.
-
     python bench/studies/dynamics_bar.py [--resolution 2] [--steps 10 24 50 100] [--periods 3]
-        [--swing-dt 0.01 0.005]
+        [--swing-dt 0.01 0.005] [--amplitudes 0.001 0.1]
 """
 from __future__ import annotations
 
@@ -49,41 +53,82 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, nargs="*", default=[10, 24, 50, 100])
     ap.add_argument("--periods", type=int, default=3)
     ap.add_argument("--swing-dt", type=float, nargs="*", default=[0.01, 0.005])
+    ap.add_argument("--amplitudes", type=float, nargs="*", default=[1e-3, 0.1],
+                    help="the bar's initial displacement / the mesh's extent (1e-3: linear; 0.1: nonlinear)")
     ap.add_argument("--threads", type=int, default=1)
     a = ap.parse_args(argv)
     start_run(a.threads)
-    bar(a)
+    for amplitude in a.amplitudes:
+        bar(a, amplitude)
     swing(a)
 
 
-def bar(a):
+def midpoint_steps(solver, steps: int, dt: float, x0):
+    """Implicit midpoint from x0 at rest: each step solves for the midpoint z as a
+    backward Euler step of dt / 2 (inertia weight 4 / dt^2, predicted x_n + dt v_n / 2),
+    then x_{n+1} = 2 z - x_n, v_{n+1} = 2 (x_{n+1} - x_n) / dt - v_n. Yields
+    (positions, velocities, Newton steps). Soft tissue only: with a rotating bone,
+    2 z - x_n is not a rigid placement of its vertices (why emu ships BDF2)."""
+    x, v = np.array(x0, dtype=np.float64), np.zeros_like(x0)
+    for _ in range(steps):
+        sol = solver.solve({}, initial=x, inertia=(4.0 / dt ** 2, x + 0.5 * dt * v))
+        if not sol.converged:
+            raise RuntimeError(f"the midpoint's solve did not converge ({sol.status})")
+        x_new = 2.0 * sol.positions - x
+        v = 2.0 * (x_new - x) / dt - v
+        x = x_new
+        yield x, v, sol.iterations
+
+
+def bar(a, amplitude: float):
     scene = emu.scenes.fusiform(a.resolution, warn=False)
     solver = emu.Solver(scene, "fem", rtol_grad=1e-10)
-    _, K = testing.reduced_system(solver._core, solver.load_case({}), scene.points, True)
+    load = solver.load_case({})
+    _, K = testing.reduced_system(solver._core, load, scene.points, True)
     free = np.setdiff1d(np.arange(len(scene.points)), scene.pinned)
-    M = np.repeat(lumped_masses(scene)[free], 3)
+    m = lumped_masses(scene)
+    M = np.repeat(m[free], 3)
     w2, V = scipy.linalg.eigh(np.asarray(K), np.diag(M), subset_by_index=[0, 0])
     period, mode = 2 * np.pi / np.sqrt(w2[0]), V[:, 0]
-    print(f"fusiform r={a.resolution}: {len(scene.tets)} tets; first period {period:.4g} s (eigenproblem)\n")
-    print("| integrator | steps per period | period / exact | amplitude kept per period | Newton per step |")
-    print("|---|---|---|---|---|")
-    amp = 1e-3 * np.abs(scene.points).max() / np.abs(mode).max()
+    energy = lambda x, v: testing.energy(solver._core, load, x) + 0.5 * np.sum(m[:, None] * v ** 2)  # noqa: E731
+    print(f"fusiform r={a.resolution}: {len(scene.tets)} tets; first period {period:.4g} s (eigenproblem); "
+          f"released from {amplitude:g} x its extent along the first mode\n")
+    print("| integrator | steps per period | period / exact | amplitude kept per period | "
+          "largest energy rise / start | Newton per step |")
+    print("|---|---|---|---|---|---|")
+    amp = amplitude * np.abs(scene.points).max() / np.abs(mode).max()
     x0 = scene.points.copy()
     x0[free] += amp * mode.reshape(-1, 3)
-    for integrator in ("backward_euler", "bdf2"):
+    e0 = energy(x0, np.zeros_like(x0)) - testing.energy(solver._core, load, scene.points)
+    for integrator in ("backward_euler", "bdf2", "implicit_midpoint"):
         for n in a.steps:
-            dyn = emu.Dynamics(period / n, integrator)
-            q, newton = [(x0 - scene.points)[free].ravel() @ (M * mode)], 0
-            for sol in emu.solve_frames(solver, [{}] * (n * a.periods), dynamics=dyn,
-                                        state=emu.MotionState.at_rest(x0)):
-                q.append((sol.positions - scene.points)[free].ravel() @ (M * mode))
-                newton += sol.iterations
+            dt = period / n
+            q, newton, rise = [(x0 - scene.points)[free].ravel() @ (M * mode)], 0, 0.0
+            try:
+                for x, v, iterations in steps_of(solver, integrator, n * a.periods, dt, x0):
+                    q.append((x - scene.points)[free].ravel() @ (M * mode))
+                    newton += iterations
+                    rise = max(rise, energy(x, v) - energy(x0, np.zeros_like(x0)))
+            except RuntimeError as e:
+                print(f"| {integrator} | {n} | diverged at step {len(q)}: {e} | | {rise / e0:.1e} | |")
+                continue
             q = np.array(q)
             z = [k + q[k] / (q[k] - q[k + 1]) for k in range(len(q) - 1) if q[k] * q[k + 1] < 0]
-            measured = 2 * np.mean(np.diff(z)) * dyn.dt if len(z) >= 3 else float("nan")
+            measured = 2 * np.mean(np.diff(z)) * dt if len(z) >= 3 else float("nan")
             kept = (np.abs(q[-n:]).max() / abs(q[0])) ** (1.0 / (a.periods - 1)) if a.periods > 1 else float("nan")
-            print(f"| {integrator} | {n} | {measured / period:.4f} | {kept:.3f} | {newton / len(q[1:]):.1f} |")
+            print(f"| {integrator} | {n} | {measured / period:.4f} | {kept:.3f} | {rise / e0:.1e} | "
+                  f"{newton / len(q[1:]):.1f} |")
+    print()
 
+
+def steps_of(solver, integrator: str, steps: int, dt: float, x0):
+    """(positions, velocities, Newton steps) of each step from x0 at rest."""
+    if integrator == "implicit_midpoint":
+        yield from midpoint_steps(solver, steps, dt, x0)
+        return
+    for sol in emu.solve_frames(solver, [{}] * steps, dynamics=emu.Dynamics(dt, integrator),
+                                state=emu.MotionState.at_rest(x0)):
+        yield sol.positions, sol.velocities, sol.iterations
 
 
 def swing(a):
