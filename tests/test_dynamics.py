@@ -280,3 +280,27 @@ def test_emu_time_steps_match_fem_steps_from_the_same_state():
         assert prev.error_estimate is not None and prev.error_estimate < 0.01
         state = dyn.advance(state, prev.positions)
     assert np.abs(state.velocities).max() > 0
+
+
+def test_vertex_masses_are_the_solvers_masses():
+    # emu.vertex_masses: the lumped masses the solvers' inertia uses, read back
+    # from FEM's incremental potential: (w / 2) sum over moving vertices of
+    # m_v |x_v - y_v|^2 (the forearm's vertices move with it, the humerus' not)
+    scene = emu.scenes.arm(1)
+    m = emu.vertex_masses(scene)
+    np.testing.assert_allclose(m, lumped_masses(scene), rtol=1e-12)
+    assert m.sum() == pytest.approx(sum(p.density * np.abs(rest_geometry(scene.points, scene.tets[p.tets])[0]).sum()
+                                        for p in scene.parts.values()), rel=1e-12)
+    solver = emu.Solver(scene, "fem")
+    load = solver.load_case({})
+    rng = np.random.default_rng(8)
+    d = 1e-3 * rng.standard_normal(scene.points.shape)
+    plain = testing.energy(solver._core, load, scene.points)
+    load.inertia_weight, load.inertia_target = 7.0, scene.points + d
+    moving = np.ones(len(m), bool)
+    moving[scene.pinned] = False
+    for p in scene.parts.values():
+        if p.kind == "bone" and p.fixed:
+            moving[np.unique(scene.tets[p.tets])] = False
+    want = 0.5 * 7.0 * np.sum(m[moving] * np.sum(d[moving] ** 2, axis=1))
+    assert testing.energy(solver._core, load, scene.points) - plain == pytest.approx(want, rel=1e-9)

@@ -30,7 +30,7 @@ from .solve.options import AccuracyOptions, EmuOptions, FemOptions, NewtonOption
 from .model.bones import bone_angle, bone_motion, rigid_fit, signed_angle
 from .model.contact import ContactWarning
 from .solve.frames import Frame, solve_frames
-from .solve.dynamics import Dynamics, MotionState
+from .solve.dynamics import Dynamics, MotionState, vertex_masses
 from .app.sweep import sweep
 from .app.run import run_scene
 from .app.scenefile import SceneFileError, load_scene_file
@@ -44,5 +44,5 @@ __all__ = ["Scene", "Part", "Joint", "MeshWarning", "lame", "Solver", "Solution"
            "AccuracyOptions", "NewtonOptions", "EmuOptions", "FemOptions", "rotation", "pose_about",
            "io", "procedural", "scenes", "shapes", "anatomy", "author", "arm26", "datasets", "fibers", "info", "vertex_error", "error_history", "time_to_error", "bbox_diagonal", "inverted_tets", "bone_angle", "bone_motion", "rigid_fit",
            "signed_angle", "NeutralModeWarning", "AccuracyWarning", "ActivationWarning", "ContactWarning", "contact", "sweep",
-           "run_scene", "load_scene_file", "SceneFileError", "Frame", "solve_frames", "Dynamics", "MotionState", "__version__",
+           "run_scene", "load_scene_file", "SceneFileError", "Frame", "solve_frames", "Dynamics", "MotionState", "vertex_masses", "__version__",
            "activation", "checks", "geometry", "poses", "runtime", "bones", "joints", "lowering", "options"]

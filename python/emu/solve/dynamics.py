@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Dynamics", "MotionState", "INTEGRATORS"]
+__all__ = ["Dynamics", "MotionState", "INTEGRATORS", "vertex_masses"]
 
 INTEGRATORS = ("backward_euler", "bdf2")
 
@@ -82,6 +82,20 @@ class Dynamics:
     def _bdf2(self, state: "MotionState") -> bool:
         """Whether this step is BDF2's (its first step is backward Euler's: no step before)."""
         return self.integrator == "bdf2" and state.previous_positions is not None
+
+
+def vertex_masses(scene) -> np.ndarray:
+    """Lumped vertex masses (#V): each tet's mass (its part's density x volume)
+    split equally among its four corners, as the solvers' inertia and gravity
+    take them (pinned vertices and bones' included)."""
+    corners = scene.points[scene.tets]
+    volume = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) / 6.0
+    density = np.zeros(len(scene.tets))
+    for part in scene.parts.values():
+        density[part.tets] = part.density
+    m = np.zeros(len(scene.points))
+    np.add.at(m, scene.tets.ravel(), np.repeat(0.25 * density * volume, 4))
+    return m
 
 
 def _real(value) -> bool:
