@@ -14,6 +14,7 @@ import scipy.linalg
 
 import emu
 from emu._core import testing
+from emu.build.procedural import block_mesh
 from conftest import rest_geometry
 
 
@@ -304,3 +305,41 @@ def test_vertex_masses_are_the_solvers_masses():
             moving[np.unique(scene.tets[p.tets])] = False
     want = 0.5 * 7.0 * np.sum(m[moving] * np.sum(d[moving] ** 2, axis=1))
     assert testing.energy(solver._core, load, scene.points) - plain == pytest.approx(want, rel=1e-9)
+
+
+def _dropped_bone():
+    """A fixed block, a passive muscle block, and a bone on no joint (six
+    degrees of freedom) hanging from it, under gravity."""
+    pts, tets, lab = block_mesh({"base": [(0, 0, 0)], "m": [(1, 0, 0)], "loose": [(2, 0, 0)]}, 2)
+    scene = emu.Scene(pts, tets, warn=False)
+    scene.add_bone("base", lab == 0)
+    scene.add_muscle("m", lab == 1, [1.0, 0.3, 0.1])
+    scene.add_bone("loose", lab == 2, fixed=False)
+    scene.gravity = [0.0, -9.81, 0.0]
+    return scene
+
+
+def test_a_dropped_bone_loses_energy_only_at_the_integrators_order():
+    # Undamped, a time step's energy loss is the integrator's own: over half a
+    # second of a bone dropped on a muscle, halving the step halves backward
+    # Euler's loss (first order) and quarters BDF2's (second order), and the
+    # energy (elastic, gravity's, kinetic) never rises above its start
+    scene = _dropped_bone()
+    m = emu.vertex_masses(scene)
+    solver = emu.Solver(scene, "fem", rtol_grad=1e-10)
+    load = solver.load_case({})
+
+    def energy(x, v):
+        return testing.energy(solver._core, load, x) + 0.5 * np.sum(m[:, None] * v ** 2)
+    e0 = energy(scene.points, np.zeros_like(scene.points))
+    motion = e0 - testing.energy(solver._core, load, solver.solve({}).positions)
+    lost = {}
+    for integrator in ("backward_euler", "bdf2"):
+        for dt in (0.01, 0.005):
+            energies = [energy(s.positions, s.velocities) for s in
+                        emu.solve_frames(solver, [{}] * int(round(0.5 / dt)), dynamics=emu.Dynamics(dt, integrator))]
+            assert max(energies) <= e0 + 1e-9 * motion
+            lost[integrator, dt] = (e0 - energies[-1]) / motion
+    assert 0.4 <= lost["backward_euler", 0.005] / lost["backward_euler", 0.01] <= 0.6
+    assert 0.15 <= lost["bdf2", 0.005] / lost["bdf2", 0.01] <= 0.35
+    assert lost["bdf2", 0.01] < 0.2 * lost["backward_euler", 0.01]

@@ -18,7 +18,7 @@ forearm swinging under gravity.
    forearm's angle range in the last quarter second against the first, and
    whether the energy ever rose above its start.
     python bench/studies/dynamics_bar.py [--resolution 2] [--steps 10 24 50 100] [--periods 3]
-        [--swing-dt 0.01 0.005] [--amplitudes 0.001 0.1]
+        [--swing-dt 0.01 0.005] [--amplitudes 0.001 0.1] [--drop-dt 0.02 0.01 0.005 0.0025]
 """
 from __future__ import annotations
 
@@ -31,6 +31,7 @@ import scipy.linalg
 
 import emu
 from emu._core import testing
+from emu.build.procedural import block_mesh
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/: shared scenes
 from bench_scenes import start_run  # noqa: E402
@@ -55,12 +56,53 @@ def main(argv=None):
     ap.add_argument("--swing-dt", type=float, nargs="*", default=[0.01, 0.005])
     ap.add_argument("--amplitudes", type=float, nargs="*", default=[1e-3, 0.1],
                     help="the bar's initial displacement / the mesh's extent (1e-3: linear; 0.1: nonlinear)")
+    ap.add_argument("--drop-dt", type=float, nargs="*", default=[0.02, 0.01, 0.005, 0.0025])
     ap.add_argument("--threads", type=int, default=1)
     a = ap.parse_args(argv)
     start_run(a.threads)
     for amplitude in a.amplitudes:
         bar(a, amplitude)
     swing(a)
+    drop(a)
+
+
+def dropped_bone_scene():
+    """A fixed block, a passive muscle block, a bone block on no joint below it (2 x 2 x 2 each)."""
+    pts, tets, lab = block_mesh({"base": [(0, 0, 0)], "m": [(1, 0, 0)], "loose": [(2, 0, 0)]}, 2)
+    scene = emu.Scene(pts, tets, warn=False)
+    scene.add_bone("base", lab == 0)
+    scene.add_muscle("m", lab == 1, [1.0, 0.3, 0.1])
+    scene.add_bone("loose", lab == 2, fixed=False)
+    scene.gravity = [0.0, -9.81, 0.0]
+    return scene
+
+
+def drop(a):
+    scene = dropped_bone_scene()
+    m = emu.vertex_masses(scene)
+    solver = emu.Solver(scene, "fem", rtol_grad=1e-10)
+    load = solver.load_case({})
+    energy = lambda x, v: testing.energy(solver._core, load, x) + 0.5 * np.sum(m[:, None] * v ** 2)  # noqa: E731
+    e0 = energy(scene.points, np.zeros_like(scene.points))
+    motion = e0 - testing.energy(solver._core, load, solver.solve({}).positions)
+    print(f"\na bone on no joint hanging by a passive muscle, released under gravity ({len(scene.tets)} tets), "
+          f"1 s; motion energy {motion:.4g}\n")
+    print("| integrator | dt s | energy lost / motion energy | lost / lost at twice the step | "
+          "largest rise above start | Newton per step |")
+    print("|---|---|---|---|---|---|")
+    for integrator in ("backward_euler", "bdf2"):
+        before = None
+        for dt in a.drop_dt:
+            n = int(round(1.0 / dt))
+            energies, newton = [], 0
+            for sol in emu.solve_frames(solver, [{}] * n, dynamics=emu.Dynamics(dt, integrator)):
+                energies.append(energy(sol.positions, sol.velocities))
+                newton += sol.iterations
+            lost = (e0 - energies[-1]) / motion
+            ratio = "-" if before is None else f"{lost / before:.2f}"
+            print(f"| {integrator} | {dt:g} | {lost:.4f} | {ratio} | {max(0.0, max(energies) - e0) / motion:.1e} | "
+                  f"{newton / n:.1f} |")
+            before = lost
 
 
 def midpoint_steps(solver, steps: int, dt: float, x0):
