@@ -45,6 +45,9 @@ struct UnknownLayout {
   Eigen::VectorXi vertex_bone;    // #V
   Eigen::MatrixX3d bone_center;   // #bones by 3 rest centroids of each bone's vertices
   std::vector<JointPoint> joints;
+  /// Whether an unknown moves vertex v: free, or on a movable bone (gravity's
+  /// and a time step's inertia act on these; the rest are pinned or fixed).
+  bool moves(Eigen::Index v) const { return free_index(v) >= 0 || vertex_bone(v) >= 0; }
 
   // Deformation unknowns.
   int num_unknowns = 0, num_soft = 0;

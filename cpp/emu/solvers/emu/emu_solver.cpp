@@ -155,7 +155,7 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
   c.x_pinned = pinned_positions(model_, load);
   Eigen::MatrixX3d f = Eigen::MatrixX3d::Zero(model_.rest.rows(), 3);
   for (Eigen::Index v = 0; v < c.x_pinned.rows(); ++v)
-    if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0) {
+    if (layout_.moves(v)) {
       c.x_pinned.row(v).setZero();
       f.row(v) = gravity_work::vertex_gradient(layout_.lumped_mass(v), load.gravity).transpose();
     }
@@ -167,14 +167,8 @@ EmuSolver::Context EmuSolver::make_context(const LoadCase& load) const {
     // on the vertices that move with F (free, or on a movable bone), as gravity
     c.inertia_weight = load.inertia_weight;
     c.inertia_target = load.inertia_target;
-    std::vector<Eigen::Triplet<double>> diag;
-    for (Eigen::Index v = 0; v < model_.rest.rows(); ++v)
-      if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0)
-        for (int k = 0; k < 3; ++k)
-          diag.emplace_back(3 * v + k, 3 * v + k, inertia::vertex_hessian(layout_.lumped_mass(v), c.inertia_weight));
-    const Eigen::Index n3 = 3 * model_.rest.rows();
-    c.inertia_hessian.resize(n3, n3);
-    c.inertia_hessian.setFromTriplets(diag.begin(), diag.end());
+    c.inertia_hessian = inertia::diagonal_hessian(layout_.lumped_mass, c.inertia_weight,
+                                                  [&](Eigen::Index v) { return layout_.moves(v); });
   }
   if (c.has_gravity) {
     // d W(x*(F)) / dF = C^T K_c^-1 S^T f: one constant solve per load.
@@ -354,13 +348,9 @@ Mat9X EmuSolver::to_cols(const Eigen::MatrixXd& rows) const {
 
 double EmuSolver::position_energy(const Context& c, const Eigen::MatrixX3d& x) const {
   double E = contact_energy(x);
-  if (c.inertia_weight > 0) {
-    // the vertices that move with F only (the others' share is a constant)
-    for (Eigen::Index v = 0; v < x.rows(); ++v)
-      if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0)
-        E += inertia::vertex_energy(layout_.lumped_mass(v), x.row(v).transpose(), c.inertia_target.row(v).transpose(),
-                                    c.inertia_weight);
-  }
+  if (c.inertia_weight > 0)  // the vertices that move with F only
+    E += inertia::energy(layout_.lumped_mass, x, c.inertia_target, c.inertia_weight,
+                         [&](Eigen::Index v) { return layout_.moves(v); });
   return E;
 }
 
@@ -376,7 +366,7 @@ void EmuSolver::add_position_gradient(const Context& c, const Eigen::MatrixX3d& 
   Eigen::MatrixX3d gx = has_contact() ? contact_.checked_gradient(x) : Eigen::MatrixX3d::Zero(x.rows(), 3);
   if (c.inertia_weight > 0)
     for (Eigen::Index v = 0; v < x.rows(); ++v)
-      if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0)
+      if (layout_.moves(v))
         gx.row(v) += inertia::vertex_gradient(layout_.lumped_mass(v), x.row(v).transpose(),
                                               c.inertia_target.row(v).transpose(), c.inertia_weight)
                          .transpose();

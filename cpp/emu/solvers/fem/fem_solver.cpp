@@ -81,11 +81,9 @@ double FemSolver::energy_with(const Eigen::MatrixX3d& x, const Eigen::VectorXd& 
   double E = 0;
   for (Eigen::Index t = 0; t < m; ++t) E += tet_energy_[t];  // fixed order: reproducible
   if (grav.squaredNorm() > 0) E -= gravity_work::energy(layout_.lumped_mass, x, grav);
-  if (load.inertia_weight > 0)  // on the vertices that move (the rest's share is a constant), as EMU's
-    for (Eigen::Index v = 0; v < x.rows(); ++v)
-      if (layout_.free_index(v) >= 0 || layout_.vertex_bone(v) >= 0)
-        E += inertia::vertex_energy(layout_.lumped_mass(v), x.row(v).transpose(), load.inertia_target.row(v).transpose(),
-                                    load.inertia_weight);
+  if (load.inertia_weight > 0)  // on the vertices that move, as EMU's
+    E += inertia::energy(layout_.lumped_mass, x, load.inertia_target, load.inertia_weight,
+                         [&](Eigen::Index v) { return layout_.moves(v); });
   return E;
 }
 
@@ -96,14 +94,8 @@ void FemSolver::set_inertia(const LoadCase& load) {
     return;
   }
   // the bones' vertices: their inertia turns and moves the bone (RigidBones::add_vertex_hessian)
-  std::vector<Eigen::Triplet<double>> diag;
-  for (Eigen::Index v = 0; v < model_.rest.rows(); ++v)
-    if (layout_.vertex_bone(v) >= 0 && layout_.free_index(v) < 0)
-      for (int c = 0; c < 3; ++c)
-        diag.emplace_back(3 * v + c, 3 * v + c, inertia::vertex_hessian(layout_.lumped_mass(v), inertia_weight_));
-  const int n = static_cast<int>(3 * model_.rest.rows());
-  bone_inertia_.resize(n, n);
-  bone_inertia_.setFromTriplets(diag.begin(), diag.end());
+  bone_inertia_ = inertia::diagonal_hessian(layout_.lumped_mass, inertia_weight_,
+                                            [&](Eigen::Index v) { return layout_.vertex_bone(v) >= 0; });
 }
 
 void FemSolver::free_gradient(const LoadCase& load, const Eigen::MatrixX3d& x,
