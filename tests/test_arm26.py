@@ -197,3 +197,16 @@ def test_emu_data_arm26_says_where_and_whose(built):
     assert datasets.fetch_main(["arm26"], progress=lines.append) == 0
     assert lines[-1] == f"arm26: {vtu}"
     assert any("opensim-org/opensim-models at 20a888b9655e" in s and "CC BY 3.0" in s for s in lines)
+
+
+def test_source_files_are_the_opensim_files_checked(monkeypatch):
+    # datasets.source_files: arm26's OpenSim files from EMU_OPENSIM_DIR, each
+    # path under it (hash-checked as a build reads them); a scene that is not
+    # built from sources is named
+    monkeypatch.setenv("EMU_OPENSIM_DIR", str(OPENSIM_FILES))
+    files = datasets.source_files("arm26")
+    assert set(FILES) <= set(files)
+    for rel, local in files.items():
+        assert Path(local) == OPENSIM_FILES / rel and Path(local).is_file()
+    with pytest.raises(ValueError, match="'biceps' is not built from source files.*arm26"):
+        datasets.source_files("biceps")

@@ -19,8 +19,7 @@ from emu.build import datasets
 
 
 def main(threads: list) -> None:
-    source = datasets._BUILT["arm26"][0]   # the OpenSim files, as emu.arm26 builds from them
-    files, _ = datasets._raw_files("arm26", None, source, sorted(source.registry))
+    files = datasets.source_files("arm26")   # the OpenSim files, as emu.arm26 builds from them
     spec = arm26.parts(files)
     for n in threads:
         t0 = time.perf_counter()

@@ -63,7 +63,7 @@ import urllib.request
 
 import numpy as np
 
-__all__ = ["names", "path", "fetch", "fetch_main", "cache_dir", "read_dmat", "convert",
+__all__ = ["names", "path", "fetch", "fetch_main", "cache_dir", "read_dmat", "convert", "source_files",
            "DatasetError", "DownloadError", "HashMismatchError", "UnknownDatasetError",
            "REPOSITORY", "COMMIT", "BASE_URL", "REGISTRY", "OPENSIM_REPOSITORY", "OPENSIM_COMMIT",
            "OPENSIM_REGISTRY"]
@@ -507,6 +507,16 @@ def _raw_files(name, progress, source=_FAST_MUSCLES, rels=None):
     return out, root
 
 
+def source_files(name, *, progress=None) -> dict:
+    """{relative path: local path} of the source files a built scene is made
+    from (``arm26``: the OpenSim model and bone surfaces, from
+    EMU_OPENSIM_DIR or downloaded into the cache and checked by hash)."""
+    if name not in _BUILT:
+        raise ValueError(f"'{name}' is not built from source files (those that are: {', '.join(sorted(_BUILT))})")
+    source = _BUILT[name][0]
+    return _raw_files(name, progress, source, sorted(source.registry))[0]
+
+
 def _built(name, progress, force):
     """Scene ``name`` built from surfaces (emu.arm26): its mesh.vtu, building it
     into the cache on first use (or with force); dataset.json, written last,
@@ -525,7 +535,7 @@ def _built(name, progress, force):
                     return vtu
         except (OSError, ValueError):
             pass
-    files, _ = _raw_files(name, progress, source, sorted(source.registry))
+    files = source_files(name, progress=progress)
     if os.path.exists(marker):
         os.remove(marker)
     try:
