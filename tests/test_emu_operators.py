@@ -563,17 +563,20 @@ def test_single_precision_s0_is_the_old_name_of_single_precision_preconditioner(
                    single_precision_preconditioner=True)
 
 
-@pytest.mark.parametrize("ratio", [0.1, 10.0])
-def test_constant_schur_preconditioner_with_inertia(ratio):
+@pytest.mark.parametrize("ratio, tendon_fraction, single", [(0.1, 0.12, False), (10.0, 0.12, False),
+                                                            (10.0, 0.0, True)])
+def test_constant_schur_preconditioner_with_inertia(ratio, tendon_fraction, single):
     """A time step's inertia (w / 2) |x(F) - y|^2_M adds J^T w M J (J = K^-1 C,
     the fit's Jacobian) to the Hessian. The constant Schur preconditioner then
     inverts A - alpha^2 C^T (alpha K + w M)^-1 C through S0 + (w / alpha) M on
     the free vertices (built here in numpy): the same vectors, and the
     preconditioned Hessian with the inertia far better conditioned than with
     the preconditioner that leaves it out. w is set so that w M stands at
-    `ratio` x alpha K's mean diagonal."""
-    s, _ = small_scene(2)
-    solver = emu.Solver(s, "emu", alpha=100.0, preconditioner="constant-schur", single_precision_preconditioner=False)
+    `ratio` x alpha K's mean diagonal. Without tendons S0 = c K serves the
+    quasi-static solves and the inertia gives S0 its own factor (and back);
+    single precision rounds it (float round-off, not more)."""
+    s, _ = small_scene(2, tendon_fraction=tendon_fraction)
+    solver = emu.Solver(s, "emu", alpha=100.0, preconditioner="constant-schur", single_precision_preconditioner=single)
     core = solver._core
     R = Reference(solver)
     mf = R.mass[R.free]
@@ -595,7 +598,8 @@ def test_constant_schur_preconditioner_with_inertia(ratio):
     Rhs = np.random.default_rng(32).standard_normal((R.m, 9))
     got = testing.constant_schur_solve(core, load, F, Rhs)
     want = (with_inertia @ Rhs.ravel()).reshape(-1, 9)
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-8 * np.abs(want).max())
+    tol = (1e-5 if single else 1e-8) * np.abs(want).max()
+    np.testing.assert_allclose(got, want, rtol=0, atol=tol)
     J = sl.solve(R.K, R.C, assume_a="pos")
     H = R.hessian(A) + w * J.T @ Mf @ J
 
@@ -607,4 +611,22 @@ def test_constant_schur_preconditioner_with_inertia(ratio):
     assert kept < 0.5 * left_out
     load.inertia_weight = 0.0   # back to the quasi-static preconditioner
     np.testing.assert_allclose(testing.constant_schur_solve(core, load, F, Rhs),
-                               (without @ Rhs.ravel()).reshape(-1, 9), rtol=0, atol=1e-8 * np.abs(want).max())
+                               (without @ Rhs.ravel()).reshape(-1, 9), rtol=0, atol=tol)
+
+
+def test_each_emu_solve_gives_its_preconditioner_the_steps_inertia():
+    """EmuSolver::solve sets the constant Schur preconditioner's inertia from its
+    load: a time step's weight, then 0 for a quasi-static solve, whose CG and
+    answer are then those of a solver that never took a time step."""
+    s, _ = small_scene(2)
+    act = {"belly": 5e4}
+    fresh = emu.Solver(s, "emu", alpha=100.0, error_estimate=False)
+    want = fresh.solve(act)
+    solver = emu.Solver(s, "emu", alpha=100.0, error_estimate=False)
+    assert testing.constant_schur_inertia(solver._core) == 0.0
+    step = solver.solve(act, inertia=(2.5e3, s.points))
+    assert step.converged and testing.constant_schur_inertia(solver._core) == 2.5e3
+    got = solver.solve(act)
+    assert testing.constant_schur_inertia(solver._core) == 0.0
+    assert got.cg_iterations == want.cg_iterations and got.iterations == want.iterations
+    np.testing.assert_array_equal(got.positions, want.positions)

@@ -67,7 +67,8 @@ def main(argv=None):
 
 
 def dropped_bone_scene():
-    """A fixed block, a passive muscle block, a bone block on no joint below it (2 x 2 x 2 each)."""
+    """A fixed block, a passive muscle block and a bone block on no joint, side by side along x
+    (2 x 2 x 2 each), gravity along -y."""
     pts, tets, lab = block_mesh({"base": [(0, 0, 0)], "m": [(1, 0, 0)], "loose": [(2, 0, 0)]}, 2)
     scene = emu.Scene(pts, tets, warn=False)
     scene.add_bone("base", lab == 0)

@@ -34,6 +34,8 @@ void bind_emu_testing(py::module_& t) {
         py::arg("R"), gil());
   t.def("constant_schur_solve", &EmuSolverTesting::constant_schur_solve, py::arg("solver"), py::arg("load"),
         py::arg("F"), py::arg("R"), gil());
+  t.def("constant_schur_inertia", &EmuSolverTesting::constant_schur_inertia, py::arg("solver"),
+        "the inertia weight the constant Schur preconditioner's S0 holds (each solve sets it)");
   t.def("bone_turn", &EmuSolverTesting::bone_turn, py::arg("solver"), py::arg("load"), py::arg("F"), py::arg("bone"),
         py::arg("M"), py::arg("exact") = false, gil(),
         "(Z, H Z): the bone coarse space's turn of a movable bone by the tangent M, from its unit-turn fits");

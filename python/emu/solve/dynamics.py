@@ -87,7 +87,9 @@ class Dynamics:
 def vertex_masses(scene) -> np.ndarray:
     """Lumped vertex masses (#V): each tet's mass (its part's density x volume)
     split equally among its four corners, as the solvers' inertia and gravity
-    take them (pinned vertices and bones' included)."""
+    take them on every vertex that moves. Every tet counts here; the solvers
+    leave out fixed bones' tets, so a vertex on a fixed bone (which never
+    moves) weighs less there."""
     corners = scene.points[scene.tets]
     volume = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) / 6.0
     density = np.zeros(len(scene.tets))

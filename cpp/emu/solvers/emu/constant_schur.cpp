@@ -34,15 +34,27 @@ ConstantSchur::ConstantSchur(const Model& model, const UnknownLayout& layout, Ac
 
 void ConstantSchur::set_alpha(double alpha) {
   if (alpha == alpha_) return;
+  const double before = alpha_;
   alpha_ = alpha;
-  build_s0();
+  try {
+    build_s0();
+  } catch (...) {  // S0 stays as it was: the next call with this alpha tries again
+    alpha_ = before;
+    throw;
+  }
 }
 
 void ConstantSchur::set_inertia(double weight) {
   if (!(weight >= 0) || !std::isfinite(weight)) throw std::invalid_argument("the inertia weight must be >= 0 and finite");
   if (weight == inertia_) return;
+  const double before = inertia_;
   inertia_ = weight;
-  build_s0();
+  try {
+    build_s0();
+  } catch (...) {
+    inertia_ = before;
+    throw;
+  }
 }
 
 void ConstantSchur::build_s0() {
@@ -72,7 +84,8 @@ void ConstantSchur::build_s0() {
   // of its factor beside it (solve_rounded: operators without movable bones;
   // a bone scene always has its own S0, a bone tet's e_t being w V and a soft
   // tet's less). Whether S0 = c K depends on the tissues, not on alpha, so
-  // such a copy is never left behind by a later alpha.
+  // a later alpha never leaves such a copy behind; a time step's inertia
+  // gives S0 its own factor and the copy stays for the next quasi-static solve.
   rounded_ = single_precision_ && (s0_ != nullptr || !acap_.has_bones());
   if (rounded_ && !s0_) acap_.keep_single_precision_copy();
 }

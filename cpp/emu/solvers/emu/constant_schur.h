@@ -76,6 +76,8 @@ class ConstantSchur final : public BlockPreconditioner {
   static Eigen::VectorXd weights(const Model& model, const UnknownLayout& layout, const Eigen::VectorXd& wv,
                                  double alpha);
 
+  /// The inertia weight S0 was last built with (0: none).
+  double inertia() const { return inertia_; }
   /// Entries of S0's own factor (0 where S0 is a multiple of K and K's factor serves).
   double factor_nnz() const { return s0_ ? s0_->factor().factor_nnz() : 0.0; }
   /// Bytes held: S0's own factor (if any) and the block inverses.

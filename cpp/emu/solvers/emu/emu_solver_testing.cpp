@@ -138,6 +138,12 @@ Eigen::MatrixXd EmuSolverTesting::constant_schur_solve(EmuSolver& s, const LoadC
                               "a filtered Hessian block is not positive definite");
 }
 
+double EmuSolverTesting::constant_schur_inertia(const EmuSolver& s) {
+  auto* pc = dynamic_cast<const ConstantSchur*>(s.preconditioner_.get());
+  if (!pc) throw std::invalid_argument("this solver has no constant Schur preconditioner (preconditioner='constant-schur')");
+  return pc->inertia();
+}
+
 Woodbury& EmuSolverTesting::woodbury_of(const EmuSolver& s) {
   auto* w = dynamic_cast<Woodbury*>(s.preconditioner_.get());
   if (!w) throw std::invalid_argument("this solver has no Woodbury preconditioner (preconditioner='woodbury')");

@@ -49,6 +49,8 @@ struct EmuSolverTesting {
   /// A_u at F; a solver built with preconditioner = ConstantSchur.
   static Eigen::MatrixXd constant_schur_solve(EmuSolver& s, const LoadCase& load, const Eigen::MatrixXd& F,
                                               const Eigen::MatrixXd& R);
+  /// The inertia weight the constant Schur preconditioner's S0 holds (set by each solve).
+  static double constant_schur_inertia(const EmuSolver& s);
   /// The bone coarse space's turn of movable bone `bone` by the tangent M
   /// (3x3, W R for a turn W of the bone's rotation R) with the soft tissue
   /// following (bone_coarse_space.h): Z (M on the bone, the soft F_t of the
