@@ -37,17 +37,6 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__)))) 
 from bench_scenes import start_run  # noqa: E402
 
 
-def lumped_masses(scene) -> np.ndarray:
-    e = scene.points[scene.tets]
-    vol = np.abs(np.linalg.det(e[:, 1:] - e[:, :1])) / 6.0
-    rho = np.zeros(len(scene.tets))
-    for part in scene.parts.values():
-        rho[part.tets] = part.density
-    m = np.zeros(len(scene.points))
-    np.add.at(m, scene.tets.ravel(), np.repeat(0.25 * rho * vol, 4))
-    return m
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--resolution", type=int, default=2)
@@ -129,7 +118,7 @@ def bar(a, amplitude: float):
     load = solver.load_case({})
     _, K = testing.reduced_system(solver._core, load, scene.points, True)
     free = np.setdiff1d(np.arange(len(scene.points)), scene.pinned)
-    m = lumped_masses(scene)
+    m = emu.vertex_masses(scene)
     M = np.repeat(m[free], 3)
     w2, V = scipy.linalg.eigh(np.asarray(K), np.diag(M), subset_by_index=[0, 0])
     period, mode = 2 * np.pi / np.sqrt(w2[0]), V[:, 0]
@@ -177,7 +166,7 @@ def steps_of(solver, integrator: str, steps: int, dt: float, x0):
 def swing(a):
     scene = emu.scenes.arm(1)
     scene.gravity = np.array([0.0, -9.81, 0.0])
-    m = lumped_masses(scene)
+    m = emu.vertex_masses(scene)
     solver = emu.Solver(scene, "fem", rtol_grad=1e-10)
     load = solver.load_case({})
     energy = lambda x, v: testing.energy(solver._core, load, x) + 0.5 * np.sum(m[:, None] * v ** 2)  # noqa: E731

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.checks import signed_volumes
+
 __all__ = ["Dynamics", "MotionState", "INTEGRATORS", "vertex_masses"]
 
 INTEGRATORS = ("backward_euler", "bdf2")
@@ -90,8 +92,7 @@ def vertex_masses(scene) -> np.ndarray:
     take them on every vertex that moves. Every tet counts here; the solvers
     leave out fixed bones' tets, so a vertex on a fixed bone (which never
     moves) weighs less there."""
-    corners = scene.points[scene.tets]
-    volume = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) / 6.0
+    volume = np.abs(signed_volumes(scene.points, scene.tets))
     density = np.zeros(len(scene.tets))
     for part in scene.parts.values():
         density[part.tets] = part.density

@@ -33,26 +33,21 @@ ConstantSchur::ConstantSchur(const Model& model, const UnknownLayout& layout, Ac
 }
 
 void ConstantSchur::set_alpha(double alpha) {
-  if (alpha == alpha_) return;
-  const double before = alpha_;
-  alpha_ = alpha;
-  try {
-    build_s0();
-  } catch (...) {  // S0 stays as it was: the next call with this alpha tries again
-    alpha_ = before;
-    throw;
-  }
+  if (alpha != alpha_) rebuild_with(alpha_, alpha);
 }
 
 void ConstantSchur::set_inertia(double weight) {
   if (!(weight >= 0) || !std::isfinite(weight)) throw std::invalid_argument("the inertia weight must be >= 0 and finite");
-  if (weight == inertia_) return;
-  const double before = inertia_;
-  inertia_ = weight;
+  if (weight != inertia_) rebuild_with(inertia_, weight);
+}
+
+void ConstantSchur::rebuild_with(double& setting, double value) {
+  const double before = setting;
+  setting = value;
   try {
     build_s0();
-  } catch (...) {
-    inertia_ = before;
+  } catch (...) {  // S0 stays as it was: the next call with this value tries again
+    setting = before;
     throw;
   }
 }

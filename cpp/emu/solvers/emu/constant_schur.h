@@ -94,6 +94,7 @@ class ConstantSchur final : public BlockPreconditioner {
   bool single_precision_, rounded_ = false;
   double alpha_, inertia_ = 0.0;
   void build_s0();  // S0 at alpha_ and inertia_
+  void rebuild_with(double& setting, double value);  // setting = value and S0 again (kept on failure)
   std::unique_ptr<AcapOperator> s0_;  // empty where S0 = scale_ K (K's factor serves)
   double scale_ = 1.0;
   std::vector<Mat9> Ainv_;          // the block inverses in double, or
