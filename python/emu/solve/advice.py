@@ -43,8 +43,8 @@ def method_hint(scene, method: str, sequence: bool = False, dynamics: bool = Fal
     at every size measured (docs/DESIGN.md, "Dynamics")."""
     if dynamics:
         return None if method == "fem" else (
-            "hint: EMU's time steps were slower than FEM's at every size measured (its preconditioner "
-            "leaves the inertia out; 0.28x on the 17k-tet muscle): method='fem', or with lagged_factor=True")
+            "hint: EMU's time steps were slower than FEM's at every size measured (its error estimate "
+            "alone costs about a FEM step; 0.30x on the 17k-tet muscle): method='fem', or with lagged_factor=True")
     faster = faster_method(scene, sequence)
     if faster == method:
         return None
